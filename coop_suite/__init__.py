@@ -1,0 +1,101 @@
+"""coop_suite: cooperative MuJoCo Ant tasks as dm_control composer environments.
+
+    import coop_suite
+    env = coop_suite.load("transport", n_agents=4, seed=0)
+    timestep = env.reset()          # observation: list of per-agent dicts
+    timestep = env.step([a0, a1, a2, a3])   # one action [8] per agent
+
+See `docs/observations.md` for every observation with its frame and units.
+"""
+
+import numbers
+import os
+
+# Headless first: render through EGL unless the user chose a backend. Must be
+# set before dm_control is imported.
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import numpy as np  # pylint: disable=g-import-not-at-top
+
+from coop_suite.environment import CoopEnvironment  # pylint: disable=g-import-not-at-top
+from coop_suite.environment import is_truncation
+from coop_suite.tasks import TASKS
+
+__all__ = ["load", "TASKS", "CoopEnvironment", "is_truncation",
+           "pettingzoo_env", "agent_range"]
+
+
+def agent_range(task):
+  """(min, max) number of agents `task` accepts."""
+  _check_task(task)
+  cls = TASKS[task][0]
+  return cls.MIN_AGENTS, cls.MAX_AGENTS
+
+
+def load(task, n_agents=None, *, seed=None, time_limit=None, **kwargs):
+  """Builds a multi-agent environment.
+
+  Args:
+    task: one of `TASKS`: 'transport', 'corridor', 'ravine' (cooperative),
+      'walk_to_target', 'walk_velocity' (single-agent locomotion).
+    n_agents: number of agents (for 'ravine': number of crossers; pushers are
+      set by `n_pushers`). Defaults to 4 for the cooperative tasks, 2 crossers
+      for the ravine and 1 for the locomotion tasks.
+    seed: integer seed for the environment's random state; the same seed
+      gives the same episodes.
+    time_limit: episode length in seconds; defaults to the task's config.
+    **kwargs: task options: any field of the task's config dataclass (e.g.
+      `target_radius=1.5`), plus task arguments such as `stage` and
+      `n_pushers` for the ravine.
+
+  Returns:
+    A `CoopEnvironment` (a `composer.Environment`).
+
+  Raises:
+    ValueError: unknown task, agent count out of range, unknown option.
+    TypeError: non-integer agent count or seed.
+  """
+  cls, config_cls, default_agents = TASKS[_check_task(task)]
+  if n_agents is None:
+    n_agents = default_agents
+  if isinstance(n_agents, bool) or not isinstance(n_agents, numbers.Integral):
+    raise TypeError(f"n_agents must be an integer, got {n_agents!r}.")
+  n_agents = int(n_agents)
+  if not cls.MIN_AGENTS <= n_agents <= cls.MAX_AGENTS:
+    raise ValueError(f"Task {task!r} accepts {cls.MIN_AGENTS} to "
+                     f"{cls.MAX_AGENTS} agents, got {n_agents}.")
+  if seed is not None and (isinstance(seed, bool)
+                           or not isinstance(seed, numbers.Integral)):
+    raise TypeError(f"seed must be an integer or None, got {seed!r}.")
+  config_fields = {f.name for f in _fields(config_cls)}
+  config_kwargs = {k: v for k, v in kwargs.items() if k in config_fields}
+  task_kwargs = {k: v for k, v in kwargs.items() if k not in config_fields}
+  allowed_task_kwargs = getattr(cls, "TASK_OPTIONS", ())
+  unknown = sorted(set(task_kwargs) - set(allowed_task_kwargs))
+  if unknown:
+    raise ValueError(
+        f"Unknown option(s) {unknown} for task {task!r}; allowed: "
+        f"{sorted(config_fields | set(allowed_task_kwargs))}.")
+  if time_limit is not None:
+    config_kwargs["time_limit"] = float(time_limit)
+  config = config_cls(**config_kwargs)
+  task_instance = cls(n_agents, config=config, **task_kwargs)
+  return CoopEnvironment(task_instance, time_limit=config.time_limit,
+                         random_state=np.random.RandomState(seed))
+
+
+def pettingzoo_env(task, n_agents=None, **load_kwargs):
+  """A PettingZoo `ParallelEnv` around `load(task, n_agents, **load_kwargs)`."""
+  from coop_suite import wrappers  # pylint: disable=g-import-not-at-top
+  return wrappers.ParallelEnv(load(task, n_agents, **load_kwargs))
+
+
+def _check_task(task):
+  if task not in TASKS:
+    raise ValueError(f"Unknown task {task!r}; choose one of {sorted(TASKS)}.")
+  return task
+
+
+def _fields(config_cls):
+  import dataclasses  # pylint: disable=g-import-not-at-top
+  return dataclasses.fields(config_cls)

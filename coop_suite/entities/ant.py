@@ -1,0 +1,216 @@
+"""The Ant walker: a quadruped robot with egocentric proprioception.
+
+The body is dm_control's Ant (same geometry, masses and motors) built from a
+trimmed MJCF (see `assets/ant.xml`). The proprioceptive observables are what
+the lower layer of the hierarchy reads; they are identical in every task so
+that one pretrained walker controller serves them all.
+
+Frames: "egocentric" means the torso frame (x forward, y left, z up in the
+torso's own orientation); "heading frame" means the world frame rotated by the
+torso's yaw only, which is what planar commands and exteroception use.
+"""
+
+import os
+
+from dm_control import composer
+from dm_control import mjcf
+from dm_control.composer.observation import observable
+from dm_env import specs
+import numpy as np
+
+_XML_PATH = os.path.join(os.path.dirname(__file__), "assets", "ant.xml")
+
+# Height of the torso centre when the ant stands on flat ground (metres).
+STANDING_HEIGHT = 0.55
+NUM_ACTUATORS = 8
+
+
+class Ant(composer.Robot):
+  """A quadruped Ant with 8 torque-controlled joints and actions in [-1, 1].
+
+  Subclasses may override `_build_observables` to expose other sensors.
+  """
+
+  def _build(self, name="ant", rgba=None):
+    """Builds the Ant.
+
+    Args:
+      name: MJCF model name; it prefixes every element once attached.
+      rgba: optional body colour, so that species or agents can be told apart
+        in videos.
+    """
+    self._mjcf_root = mjcf.from_path(_XML_PATH)
+    self._mjcf_root.model = name
+    if rgba is not None:
+      self._mjcf_root.asset.find("material", "self").rgba = rgba
+    self._prev_action = np.zeros(NUM_ACTUATORS)
+    self._joint_qpos_adr = None
+    self._joint_dof_adr = None
+
+  def _build_observables(self):
+    return AntObservables(self)
+
+  @property
+  def mjcf_model(self):
+    return self._mjcf_root
+
+  @composer.cached_property
+  def actuators(self):
+    return tuple(self._mjcf_root.find_all("actuator"))
+
+  @composer.cached_property
+  def joints(self):
+    return tuple(actuator.joint for actuator in self.actuators)
+
+  @composer.cached_property
+  def root_body(self):
+    return self._mjcf_root.find("body", "torso")
+
+  @composer.cached_property
+  def action_spec(self):
+    return specs.BoundedArray(
+        shape=(NUM_ACTUATORS,), dtype=np.float64, minimum=-1.0, maximum=1.0,
+        name="\t".join(a.name for a in self.actuators))
+
+  @property
+  def prev_action(self):
+    return self._prev_action
+
+  @property
+  def joint_ranges(self):
+    """Joint limits, shape [8, 2] (radians)."""
+    return np.array([j.range for j in self.joints], dtype=np.float64)
+
+  def after_compile(self, physics, random_state):
+    # Index arrays let observables read `physics.data` directly, which is much
+    # cheaper than binding MJCF elements at every control step.
+    joints = physics.bind(self.joints)
+    self._joint_qpos_adr = np.array(joints.qposadr)
+    self._joint_dof_adr = np.array(joints.dofadr)
+    self._actuator_ids = np.array(physics.bind(self.actuators).element_id)
+    self._torso_id = int(physics.bind(self.root_body).element_id)
+    # The free joint sits on the attachment frame, the torso's parent body,
+    # whose origin coincides with the torso's centre.
+    frame_id = physics.model.body_parentid[self._torso_id]
+    self._free_dof_adr = int(physics.model.body_dofadr[frame_id])
+    self._joint_limits = np.array(physics.model.jnt_range[joints.element_id])
+
+  def initialize_episode(self, physics, random_state):
+    self._prev_action[:] = 0.0
+
+  def apply_action(self, physics, action, random_state):
+    physics.data.ctrl[self._actuator_ids] = action
+    self._prev_action[:] = action
+
+  # --- State accessors (world frame unless stated) -------------------------
+
+  def torso_position(self, physics):
+    """Torso centre, shape [3], world frame (metres)."""
+    return physics.data.xpos[self._torso_id]
+
+  def torso_xmat(self, physics):
+    """Torso orientation as a row-major rotation matrix, shape [3, 3]."""
+    return physics.data.xmat[self._torso_id].reshape(3, 3)
+
+  def heading(self, physics):
+    """Yaw of the torso's x axis in the world frame (radians)."""
+    xmat = physics.data.xmat[self._torso_id]
+    return np.arctan2(xmat[3], xmat[0])
+
+  def world_velocity(self, physics):
+    """Torso linear velocity, shape [3], world frame (m/s)."""
+    return physics.data.qvel[self._free_dof_adr:self._free_dof_adr + 3]
+
+  def local_angular_velocity(self, physics):
+    """Torso angular velocity, shape [3], egocentric frame (rad/s)."""
+    return physics.data.qvel[self._free_dof_adr + 3:self._free_dof_adr + 6]
+
+  def upright(self, physics):
+    """Cosine between the torso's z axis and the world's z axis."""
+    return physics.data.xmat[self._torso_id][8]
+
+  def joint_positions(self, physics):
+    return physics.data.qpos[self._joint_qpos_adr]
+
+  def joint_velocities(self, physics):
+    return physics.data.qvel[self._joint_dof_adr]
+
+  def joints_at_limit(self, physics, fraction=0.99):
+    """Number of joints within `fraction` of their range's half-width."""
+    q = self.joint_positions(physics)
+    low, high = self._joint_limits[:, 0], self._joint_limits[:, 1]
+    centre, half = (high + low) / 2, (high - low) / 2
+    return int(np.sum(np.abs(q - centre) > fraction * half))
+
+
+def proprioception(walkers, physics, prev_actions):
+  """Proprioception of several Ants at once: name -> array [n, dim].
+
+  Everything the lower layer reads, in the egocentric (torso) frame:
+    joints_pos [n, 8] rad, joints_vel [n, 8] rad/s, torso_height [n, 1] m
+    (world z), gravity [n, 3] (the world's up axis seen from the torso),
+    velocity [n, 3] m/s, angular_velocity [n, 3] rad/s, prev_action [n, 8].
+  Vectorised over agents because tasks call it once per control step.
+  """
+  # pylint: disable=protected-access
+  data = physics.data
+  torso = [w._torso_id for w in walkers]
+  qpos_adr = np.concatenate([w._joint_qpos_adr for w in walkers])
+  dof_adr = np.concatenate([w._joint_dof_adr for w in walkers])
+  free = np.array([w._free_dof_adr for w in walkers])[:, None] + np.arange(6)
+  n = len(walkers)
+  xmat = data.xmat[torso].reshape(n, 3, 3)
+  free_vel = data.qvel[free]
+  return {
+      "joints_pos": data.qpos[qpos_adr].reshape(n, -1),
+      "joints_vel": data.qvel[dof_adr].reshape(n, -1),
+      "torso_height": data.xpos[torso][:, 2:3],
+      "gravity": xmat[:, 2, :],
+      "velocity": np.einsum("nji,nj->ni", xmat, free_vel[:, :3]),
+      "angular_velocity": free_vel[:, 3:],
+      "prev_action": np.array(prev_actions, dtype=np.float64).reshape(n, -1),
+  }
+
+
+PROPRIOCEPTION_KEYS = ("joints_pos", "joints_vel", "torso_height", "gravity",
+                       "velocity", "angular_velocity", "prev_action")
+
+
+class AntObservables(composer.Observables):
+  """Proprioception of one Ant, for use outside `coop_suite` tasks.
+
+  The suite's tasks compute the same features for all agents at once through
+  `proprioception`; these observables call it for a single Ant.
+  """
+
+  def _feature(self, name):
+    return observable.Generic(lambda physics: proprioception(
+        [self._entity], physics, [self._entity.prev_action])[name][0])
+
+  @composer.observable
+  def joints_pos(self):
+    return self._feature("joints_pos")
+
+  @composer.observable
+  def joints_vel(self):
+    return self._feature("joints_vel")
+
+  @composer.observable
+  def torso_height(self):
+    return self._feature("torso_height")
+
+  @composer.observable
+  def gravity(self):
+    return self._feature("gravity")
+
+  @composer.observable
+  def velocity(self):
+    return self._feature("velocity")
+
+  @composer.observable
+  def angular_velocity(self):
+    return self._feature("angular_velocity")
+
+  @composer.observable
+  def prev_action(self):
+    return self._feature("prev_action")

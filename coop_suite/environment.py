@@ -1,0 +1,220 @@
+"""`CoopEnvironment`: a composer.Environment that checks its multi-agent input.
+
+Three things differ from a plain `composer.Environment`, each for a reason:
+
+* Actions are validated *before* anything is stepped, so a wrong count,
+  shape, dtype or a NaN raises a clear error and the environment stays
+  usable (composer would otherwise write garbage into `data.ctrl`).
+* A physics divergence ends the episode (composer's
+  `raise_exception_on_physics_error=False`) and the reward keeps its
+  per-agent list form, which composer replaces by a scalar 0.0.
+* The arena is static, so the MJCF is compiled once, not at every reset.
+* When no entity or task hooks into substeps, the substeps of a control
+  step run as one `physics.step(n)` call (the same physics, fewer Python
+  round trips).
+* Observations go through `_LeanUpdater`, which skips composer's buffering
+  machinery when every observable has the default settings (no delay, no
+  buffering, no noise): composer's per-observable bookkeeping otherwise costs
+  more than the physics. Any non-default observable restores composer's own
+  updater, so its semantics are always preserved.
+"""
+
+from absl import logging
+from dm_control import composer
+from dm_control.composer import environment as composer_env
+from dm_control.composer.observation import updater as updater_lib
+from dm_control.rl import control
+import dm_env
+import numpy as np
+
+
+def _is_plain(observable):
+  """Whether composer would compute `observable` once, at the last substep."""
+  return (observable.update_interval in (None, 1)
+          and observable.delay in (None, 0)
+          and observable.buffer_size in (None, 1)
+          and observable.aggregator is None
+          and observable.corruptor is None)
+
+
+class _LeanUpdater(updater_lib.Updater):
+  """composer's observation Updater with a fast path for plain observables.
+
+  With plain observables composer evaluates each one once per control step,
+  after the last substep. This updater does the same, but lazily in
+  `get_observation`, with no buffers or schedules.
+  """
+
+  def reset(self, physics, random_state):
+    super().reset(physics, random_state)
+    structure = self._observables
+    dicts = structure if isinstance(structure, (list, tuple)) else [structure]
+    self._lean = all(_is_plain(o) for d in dicts for o in d.values()
+                     if o.enabled)
+    self._batch = None
+    if self._lean:
+      sources = [[getattr(o, "batch_source", None) for o in d.values()
+                  if o.enabled] for d in dicts]
+      owners = {src[0] for agent in sources for src in agent if src}
+      if len(owners) == 1 and all(src for agent in sources for src in agent):
+        # Every observable is one of the task's own features: read them all
+        # at once instead of one callable per agent and feature.
+        self._batch = (owners.pop(), physics, [
+            [(src[1], src[2]) for src in agent] for agent in sources])
+      self._callables = [
+          [(name, enabled.observation_callable)
+           for name, enabled in enabled_dict.items()]
+          for enabled_dict in (self._enabled_structure if self._is_nested
+                               else [self._enabled_structure])]
+
+  def prepare_for_next_control_step(self):
+    if not self._lean:
+      super().prepare_for_next_control_step()
+
+  def update(self):
+    if not self._lean:
+      super().update()
+
+  def get_observation(self):
+    if not self._lean:
+      return super().get_observation()
+    if self._batch is not None:
+      task, physics, layout = self._batch
+      out = task.observation_batch(physics, layout)
+      return out if self._is_nested else out[0]
+    out = [{name: np.array(fn()) for name, fn in callables}
+           for callables in self._callables]
+    return out if self._is_nested else out[0]
+
+
+class CoopEnvironment(composer.Environment):
+  """A multi-agent composer environment (see the module docstring)."""
+
+  def __init__(self, task, time_limit, random_state):
+    super().__init__(
+        task,
+        time_limit=time_limit,
+        random_state=random_state,
+        raise_exception_on_physics_error=False,
+        strip_singleton_obs_buffer_dim=True,
+        recompile_mjcf_every_episode=False)
+    self._physics_diverged = False
+
+  def _make_observation_updater(self):
+    return _LeanUpdater(self._task.observables,
+                        self._task.physics_steps_per_control_step,
+                        self._strip_singleton_obs_buffer_dim, False)
+
+  @property
+  def n_agents(self):
+    return self.task.n_agents
+
+  @property
+  def physics_diverged(self):
+    """Whether the last episode ended because the physics diverged."""
+    return self._physics_diverged
+
+  def reset(self):
+    self._physics_diverged = False
+    return super().reset()
+
+  def step(self, action):
+    if self._reset_next_step:
+      return self.reset()
+    action = self.validate_action(action)
+    if self._can_fuse_substeps():
+      timestep = self._fused_step(action)
+    else:
+      timestep = super().step(action)
+    if not isinstance(timestep.reward, list):
+      # Composer's divergence path returns scalars: restore the contract.
+      self._physics_diverged = True
+      timestep = timestep._replace(
+          reward=[np.zeros((), np.float32) for _ in range(self.n_agents)],
+          discount=np.zeros((), np.float32))
+    return timestep
+
+  def _can_fuse_substeps(self):
+    hooks = self._hooks
+    # pylint: disable=protected-access
+    return (self._observation_updater._lean
+            and not hooks._before_substep.entity_hooks
+            and not hooks._before_substep.extra_hooks
+            and not hooks._after_substep.entity_hooks
+            and not hooks._after_substep.extra_hooks
+            and composer_env._callable_is_trivial(self._task.before_substep)
+            and composer_env._callable_is_trivial(self._task.after_substep))
+
+  def _fused_step(self, action):
+    """composer.Environment.step with the substeps in one physics call."""
+    self._hooks.before_step(self._physics_proxy, action, self._random_state)
+    try:
+      self._physics.step(self._n_sub_steps)
+      diverged = False
+    except control.PhysicsError as e:
+      if self._raise_exception_on_physics_error:
+        raise
+      logging.warning(e)
+      diverged = True
+    self._hooks.after_step(self._physics_proxy, self._random_state)
+    if diverged:
+      reward, discount, terminating = 0.0, 0.0, True
+    else:
+      reward = self._task.get_reward(self._physics_proxy)
+      discount = self._task.get_discount(self._physics_proxy)
+      terminating = (self._task.should_terminate_episode(self._physics_proxy)
+                     or self._physics.time() >= self._time_limit)
+    observation = self._observation_updater.get_observation()
+    if terminating:
+      self._reset_next_step = True
+      return dm_env.TimeStep(dm_env.StepType.LAST, reward, discount,
+                             observation)
+    return dm_env.TimeStep(dm_env.StepType.MID, reward, discount, observation)
+
+  def validate_action(self, action):
+    """Returns `action` as a float array [n_agents, 8] or raises.
+
+    Raises:
+      TypeError: if `action` is not a sequence of numeric arrays.
+      ValueError: wrong number of agents, wrong shape, or non-finite values.
+    """
+    specs = self.action_spec()
+    n = len(specs)
+    if (isinstance(action, np.ndarray) and action.dtype.kind == "f"
+        and action.shape == (n,) + specs[0].shape):
+      # Fast path for the common case: one float array for all agents.
+      if not np.isfinite(action).all():
+        bad = np.flatnonzero(~np.isfinite(action).all(axis=1))
+        raise ValueError(f"Actions of agents {bad.tolist()} contain NaN or "
+                         "inf.")
+      return np.clip(action, specs[0].minimum, specs[0].maximum)
+    if isinstance(action, (str, bytes, dict)) or not hasattr(action, "__len__"):
+      raise TypeError(
+          f"action must be a list of {n} arrays (one per agent) or an array "
+          f"of shape ({n}, {specs[0].shape[0]}); got {type(action).__name__}.")
+    if len(action) != n:
+      raise ValueError(f"Expected actions for {n} agents, got {len(action)}.")
+    out = np.empty((n,) + specs[0].shape)
+    for i, (agent_action, spec) in enumerate(zip(action, specs)):
+      try:
+        values = np.asarray(agent_action, dtype=np.float64)
+      except (TypeError, ValueError) as e:
+        raise TypeError(f"Action of agent {i} is not numeric: {e}") from None
+      if values.shape != spec.shape:
+        raise ValueError(f"Action of agent {i} has shape {values.shape}; "
+                         f"expected {spec.shape}.")
+      if not np.all(np.isfinite(values)):
+        raise ValueError(f"Action of agent {i} contains NaN or inf: {values}.")
+      out[i] = np.clip(values, spec.minimum, spec.maximum)
+    return out
+
+  def episode_metrics(self):
+    """The task's episode metrics plus `physics_diverged`."""
+    metrics = self.task.episode_metrics(self.physics)
+    metrics["physics_diverged"] = self._physics_diverged
+    return metrics
+
+
+def is_truncation(timestep: dm_env.TimeStep) -> bool:
+  """True for a LAST step that ended by time limit rather than by the task."""
+  return timestep.last() and float(timestep.discount) > 0.0

@@ -1,0 +1,326 @@
+"""The multi-agent task base class, in dm_control soccer's convention.
+
+A `CoopTask` owns the arena, one Ant per agent and the episode bookkeeping
+(reward-term sums, success, termination). A concrete task is a small module
+that only overrides the hooks below:
+
+* `EXTERO_FEATURES`, `_exteroception(physics, frames)`: names and values
+  ([n_agents, dim] arrays) of the task's own `extero/*` features.
+* `COMMAND_FEATURES`, `_commands(physics, frames)`: the same for
+  `command/*` (locomotion tasks only).
+* `_initialize_layout(physics, random_state)`: starting poses.
+* `_reward_terms(physics)`: dict of term -> per-agent array [n_agents].
+* `_update_status(physics)`: after each control step; sets `self._success`
+  and `self._failure` (both end the episode with discount 0).
+* `_progress(physics)`: task-specific figures for `episode_metrics`.
+* `_task_state(physics)`: task objects' part of the global state.
+"""
+
+import dataclasses
+
+from dm_control import composer
+from dm_control.composer.observation import observable
+from dm_env import specs
+import numpy as np
+
+from coop_suite.entities import Ant
+from coop_suite.entities import ant as ant_lib
+from coop_suite.tasks import observables as extero
+
+SPECIES_COLOURS = {
+    "ant": (0.8, 0.6, 0.4, 1.0),
+    "pusher": (0.35, 0.55, 0.85, 1.0),
+    "crosser": (0.85, 0.55, 0.25, 1.0),
+}
+
+
+@dataclasses.dataclass(frozen=True)
+class TaskConfig:
+  """Settings shared by every task."""
+
+  physics_timestep: float = 0.01
+  """MuJoCo timestep (s). 10 ms keeps the Ant stable and fast."""
+  control_timestep: float = 0.05
+  """Time between actions (s); 5 physics steps per control step."""
+  time_limit: float = 30.0
+  """Episode length (s) after which the episode is truncated."""
+  k_neighbours: int = 1
+  """Number of nearest teammates in each agent's exteroception."""
+  height_grid: int = 3
+  """Height samples form a `height_grid` x `height_grid` square."""
+  height_spacing: float = 0.6
+  """Distance between height samples (m)."""
+  memory_mb_per_agent: float = 1.0
+  """MuJoCo constraint memory per agent (MiB), on top of 4 MiB."""
+
+
+class CoopTask(composer.Task):
+  """A cooperative task for `len(species)` Ants; see the module docstring."""
+
+  EXTERO_FEATURES = ()
+  COMMAND_FEATURES = ()
+  SHARED_EXTERO = True
+  """Whether agents see the shared exteroception (teammates, heights...)."""
+
+  def __init__(self, arena, species, config):
+    self._arena = arena
+    self._config = config
+    self._species = tuple(species)
+    self._walkers = []
+    counts = {}
+    for kind in self._species:
+      index = counts.get(kind, 0)
+      counts[kind] = index + 1
+      walker = Ant(name=f"{kind}_{index}",
+                   rgba=SPECIES_COLOURS.get(kind, SPECIES_COLOURS["ant"]))
+      arena.add_free_entity(walker)
+      self._walkers.append(walker)
+    arena.mjcf_model.size.memory = (
+        f"{int(4 + np.ceil(config.memory_mb_per_agent * len(species)))}M")
+    self.set_timesteps(control_timestep=config.control_timestep,
+                       physics_timestep=config.physics_timestep)
+    self._last_actions = np.zeros((self.n_agents, 8))
+    self._heights = extero.HeightSampler(config.height_grid,
+                                         config.height_spacing)
+    self._cache_key = None
+    self._cache = None
+    self._per_state_cache = {}
+    self._state_version = 0
+    self._reset_bookkeeping()
+    self._agent_observables = [
+        self._build_agent_observables(i) for i in range(self.n_agents)]
+
+  # --- Public API ------------------------------------------------------------
+
+  @property
+  def root_entity(self):
+    return self._arena
+
+  @property
+  def arena(self):
+    return self._arena
+
+  @property
+  def config(self):
+    return self._config
+
+  @property
+  def walkers(self):
+    return tuple(self._walkers)
+
+  @property
+  def species(self):
+    """Species name of each agent, e.g. ('crosser', 'crosser', 'pusher')."""
+    return self._species
+
+  @property
+  def n_agents(self):
+    return len(self._species)
+
+  @property
+  def observables(self):
+    return self._agent_observables
+
+  def episode_metrics(self, physics):
+    """Figures of the episode so far.
+
+    Returns a dict with `success` (bool), `return` (mean over agents of the
+    summed reward), `reward/<term>` (mean over agents of each term's sum),
+    `physics_steps` and the task's progress figures.
+    """
+    metrics = {"success": bool(self._success),
+               "failure": bool(self._failure),
+               "return": float(np.mean(self._return)),
+               "control_steps": self._steps}
+    for term, total in self._term_sums.items():
+      metrics[f"reward/{term}"] = float(np.mean(total))
+    metrics.update(self._progress(physics))
+    return metrics
+
+  def global_state(self, physics):
+    """The centralised critic's view, shape [7 * n_agents + task part].
+
+    Per agent: world x, y, z, cos(yaw), sin(yaw), vx, vy; then the task's
+    objects and goals (see `_task_state`). Metres, m/s.
+    """
+    parts = []
+    for walker in self._walkers:
+      yaw = walker.heading(physics)
+      parts.append(np.concatenate([
+          walker.torso_position(physics), [np.cos(yaw), np.sin(yaw)],
+          walker.world_velocity(physics)[:2]]))
+    parts.append(np.asarray(self._task_state(physics), dtype=np.float64))
+    return np.concatenate(parts).astype(np.float32)
+
+  def tracked_positions(self, physics):
+    """World positions [m, 3] a camera should keep in view."""
+    return np.array([w.torso_position(physics) for w in self._walkers])
+
+  # --- composer.Task hooks ---------------------------------------------------
+
+  def action_spec(self, physics):
+    return [walker.action_spec for walker in self._walkers]
+
+  def get_reward_spec(self):
+    return [specs.Array(shape=(), dtype=np.float32, name=f"reward_{i}")
+            for i in range(self.n_agents)]
+
+  def get_discount_spec(self):
+    return specs.BoundedArray(shape=(), dtype=np.float32, minimum=0.0,
+                              maximum=1.0, name="discount")
+
+  def after_compile(self, physics, random_state):
+    del random_state  # Unused.
+    # Runs before the entities' own after_compile, so bind here.
+    self._torso_ids = np.array(physics.bind(
+        [w.root_body for w in self._walkers]).element_id)
+
+  def initialize_episode(self, physics, random_state):
+    self._reset_bookkeeping()
+    self._last_actions[:] = 0.0
+    self._initialize_layout(physics, random_state)
+
+  def before_step(self, physics, action, random_state):
+    self._state_version += 1
+    for walker, walker_action in zip(self._walkers, action):
+      walker.apply_action(physics, walker_action, random_state)
+    self._last_actions[:] = action
+
+  def after_step(self, physics, random_state):
+    self._steps += 1
+    self._update_status(physics)
+
+  def get_reward(self, physics):
+    terms = self._reward_terms(physics)
+    total = np.zeros(self.n_agents)
+    sums = self._term_sums
+    for term, value in terms.items():
+      sums[term] = sums.get(term, 0.0) + value
+      total += value
+    self._return += total
+    return list(total.astype(np.float32))
+
+  def get_discount(self, physics):
+    ended = self._success or self._failure
+    return np.asarray(0.0 if ended else 1.0, dtype=np.float32)
+
+  def should_terminate_episode(self, physics):
+    return bool(self._success or self._failure)
+
+  def observation_batch(self, physics, layout):
+    """Observations for `layout` ([(name, agent index), ...] per agent).
+
+    The fast path of `CoopEnvironment`: one feature computation, then slices.
+    """
+    features = self.features(physics)
+    # Views are safe: `features` builds new arrays at every physics state.
+    return [{name: features[name][index] for name, index in agent}
+            for agent in layout]
+
+  def features(self, physics):
+    """Every observation of every agent: 'group/name' -> [n_agents, dim].
+
+    Computed once per physics state and cached, since each agent's
+    observables read from it.
+    """
+    key = (self._state_version, physics.data.time)
+    if key != self._cache_key:
+      frames = extero.AgentFrames.from_walkers(self._walkers, physics)
+      out = {f"proprio/{k}": v for k, v in ant_lib.proprioception(
+          self._walkers, physics, self._last_actions).items()}
+      groups = [("extero", self._exteroception(physics, frames),
+                 self.EXTERO_FEATURES),
+                ("command", self._commands(physics, frames),
+                 self.COMMAND_FEATURES)]
+      if self.SHARED_EXTERO:
+        groups.append(("extero", self._shared_exteroception(physics, frames),
+                       SHARED_EXTERO_FEATURES))
+      for group, values, names in groups:
+        if self._cache_key is None and set(values) != set(names):
+          raise RuntimeError(f"{type(self).__name__} computed {group} "
+                             f"features {sorted(values)}, declared {names}.")
+        for name, value in values.items():
+          out[f"{group}/{name}"] = value
+      if self._cache_key is None:  # Check shapes once, on the first state.
+        for name, value in out.items():
+          if np.ndim(value) != 2 or len(value) != self.n_agents:
+            raise RuntimeError(f"Feature {name} has shape {np.shape(value)}; "
+                               f"expected [{self.n_agents}, dim].")
+      self._cache_key, self._cache = key, out
+    return self._cache
+
+  # --- Hooks for subclasses ---------------------------------------------------
+
+  def per_state(self, name, physics, fn):
+    """`fn()` computed once per physics state (e.g. distances that both the
+    status update and the reward need)."""
+    key = (self._state_version, physics.data.time)
+    cached = self._per_state_cache.get(name)
+    if cached is None or cached[0] != key:
+      cached = (key, fn())
+      self._per_state_cache[name] = cached
+    return cached[1]
+
+  def _exteroception(self, physics, frames):
+    """The task's `extero/*` features named in `EXTERO_FEATURES`."""
+    return {}
+
+  def _commands(self, physics, frames):
+    """The task's `command/*` features named in `COMMAND_FEATURES`."""
+    return {}
+
+  def _initialize_layout(self, physics, random_state):
+    raise NotImplementedError
+
+  def _reward_terms(self, physics):
+    raise NotImplementedError
+
+  def _update_status(self, physics):
+    pass
+
+  def _progress(self, physics):
+    return {}
+
+  def _task_state(self, physics):
+    return np.zeros(0)
+
+  # --- Internals ---------------------------------------------------------------
+
+  def _reset_bookkeeping(self):
+    self._success = False
+    self._failure = False
+    self._steps = 0
+    self._return = np.zeros(self.n_agents)
+    self._term_sums = {}
+    self._state_version += 1
+
+  def _build_agent_observables(self, index):
+    """One agent's observable dict, keys grouped by prefix."""
+    names = [f"proprio/{k}" for k in ant_lib.PROPRIOCEPTION_KEYS]
+    names += [f"extero/{k}" for k in self.EXTERO_FEATURES]
+    if self.SHARED_EXTERO:
+      names += [f"extero/{k}" for k in SHARED_EXTERO_FEATURES]
+    names += [f"command/{k}" for k in self.COMMAND_FEATURES]
+    out = {}
+    for name in names:
+      out[name] = observable.Generic(
+          lambda physics, name=name: self.features(physics)[name][index])
+      out[name].enabled = True
+      # Lets `CoopEnvironment` read all agents' observations in one batch.
+      out[name].batch_source = (self, name, index)
+    return out
+
+  def _shared_exteroception(self, physics, frames):
+    """Features every cooperative task exposes (see `observables.py`)."""
+    teammates, mask = extero.nearest_teammates(frames,
+                                               self._config.k_neighbours)
+    return {
+        "self_pose": extero.self_pose(frames),
+        "teammates": teammates,
+        "teammates_mask": mask,
+        "heights": self._heights(physics, frames),
+    }
+
+
+SHARED_EXTERO_FEATURES = ("self_pose", "teammates", "teammates_mask",
+                          "heights")

@@ -1,0 +1,74 @@
+"""Reward terms from the paper's reward tables, written once for all tasks.
+
+Every function is pure numpy and returns per-agent values, shape [n_agents],
+so tasks only decide which terms to combine and with which coefficient
+(coefficients live in each task's config dataclass).
+"""
+
+import numpy as np
+
+
+def inverse_distance(scale, distance):
+  """`scale / (1 + d)`: the paper's shaping term for a distance d (metres)."""
+  return scale / (1.0 + np.asarray(distance, dtype=np.float64))
+
+
+def planar_distance(a_xy, b_xy):
+  """Euclidean distance over the last axis of [..., 2] arrays (metres)."""
+  delta = np.asarray(a_xy) - np.asarray(b_xy)
+  return np.sqrt(np.sum(delta * delta, axis=-1))
+
+
+def velocity_tracking(scale, velocity_xy, command_xy, min_speed=0.05):
+  """The velocity paradigm's `scale * clamp(v . c_hat / |c|, max=1)`.
+
+  For a unit-speed command this is the paper's `5 * clamp(v . cmd, max=1)`;
+  dividing by the commanded speed makes slower commands reachable. A command
+  slower than `min_speed` (m/s) means "stand still" and pays
+  `scale * (1 - min(|v| / 0.5, 1))` instead.
+
+  Args:
+    scale: coefficient.
+    velocity_xy: achieved planar velocity [..., 2], world frame (m/s).
+    command_xy: commanded planar velocity [..., 2], world frame (m/s).
+    min_speed: below this commanded speed, the stand-still reward applies.
+  """
+  velocity_xy = np.asarray(velocity_xy, dtype=np.float64)
+  command_xy = np.asarray(command_xy, dtype=np.float64)
+  speed = np.linalg.norm(command_xy, axis=-1)
+  safe = np.maximum(speed, min_speed)
+  tracking = np.minimum(np.sum(velocity_xy * command_xy, -1) / safe**2, 1.0)
+  still = 1.0 - np.minimum(np.linalg.norm(velocity_xy, axis=-1) / 0.5, 1.0)
+  return scale * np.where(speed >= min_speed, tracking, still)
+
+
+def locomotion_terms(walkers, physics, actions, config):
+  """The lower layer's shared terms (alive, up, action/energy/limit costs).
+
+  Follows Isaac Gym's Ant, which the paper's tables come from: the up bonus
+  is paid while the torso's z axis is within ~21 degrees of vertical, energy
+  is |action * joint velocity| with velocities scaled by 0.2, and a joint is
+  "at its limit" beyond 99% of its half-range. Costs are returned negative.
+
+  Args:
+    walkers: the Ants, one per agent.
+    physics: the physics.
+    actions: [n_agents, 8] last actions.
+    config: an object with fields alive_bonus, up_bonus, action_cost,
+      energy_cost, joint_limit_cost.
+  Returns:
+    dict of term name -> [n_agents] array.
+  """
+  actions = np.asarray(actions, dtype=np.float64)
+  upright = np.array([w.upright(physics) for w in walkers])
+  joint_vel = np.array([w.joint_velocities(physics) for w in walkers])
+  at_limit = np.array([w.joints_at_limit(physics) for w in walkers])
+  n = len(walkers)
+  return {
+      "alive": np.full(n, config.alive_bonus),
+      "up": np.where(upright > 0.93, config.up_bonus, 0.0),
+      "action_cost": -config.action_cost * np.sum(actions**2, axis=-1),
+      "energy_cost": -config.energy_cost * np.sum(
+          np.abs(actions * 0.2 * joint_vel), axis=-1),
+      "joint_limit_cost": -config.joint_limit_cost * at_limit,
+  }

@@ -1,0 +1,1 @@
+"""Runners: command-line programs that wire `coop_suite` and `agents`."""

@@ -1,0 +1,121 @@
+"""Records a task to mp4 (and/or one PNG still) headless, with no viewer.
+
+    python -m runners.video --task transport --n-agents 4 --policy random \
+        --seconds 10 --out transport.mp4 --png transport.png
+
+Rendering uses MuJoCo's offscreen EGL context (`MUJOCO_GL=egl` is set by
+`coop_suite` unless you chose another backend), so it works on a server.
+"""
+
+import argparse
+import dataclasses
+import os
+import sys
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import imageio  # pylint: disable=g-import-not-at-top
+import numpy as np
+import tqdm
+
+import coop_suite
+from coop_suite import camera as camera_lib
+
+POLICIES = ("random", "zero")
+
+
+@dataclasses.dataclass(frozen=True)
+class VideoArgs:
+  """What to record."""
+
+  task: str = "transport"
+  """Task name: one of coop_suite.TASKS."""
+  n_agents: int = 4
+  """Number of agents (ravine: crossers)."""
+  policy: str = "random"
+  """'random' (uniform actions in [-1, 1]) or 'zero'."""
+  seconds: float = 10.0
+  """Simulated seconds to record (the episode restarts if it ends)."""
+  out: str = ""
+  """mp4 file to write; empty for none."""
+  png: str = ""
+  """PNG still of the first frame to write; empty for none."""
+  seed: int = 0
+  """Environment and policy seed."""
+  width: int = 640
+  height: int = 480
+  fps: int = 20
+  """Frames per second of the video (one frame per control step at 20)."""
+
+
+def make_policy(name, env, seed):
+  """A function timestep -> actions [n_agents, 8] for a non-learned policy."""
+  if name not in POLICIES:
+    raise ValueError(f"Unknown policy {name!r}; choose one of {POLICIES}.")
+  n = env.n_agents
+  rng = np.random.RandomState(seed)
+  if name == "zero":
+    return lambda timestep: np.zeros((n, 8))
+  return lambda timestep: rng.uniform(-1.0, 1.0, (n, 8))
+
+
+def record(args: VideoArgs, policy=None):
+  """Runs the episode(s) and writes the requested files. Returns #frames."""
+  if not args.out and not args.png:
+    raise ValueError("Nothing to write: give --out FILE.mp4 and/or --png.")
+  env = coop_suite.load(args.task, args.n_agents, seed=args.seed)
+  policy = policy or make_policy(args.policy, env, args.seed)
+  camera = camera_lib.FramingCamera()
+  timestep = env.reset()
+  control_dt = env.control_timestep()
+  steps = max(1, int(round(args.seconds / control_dt)))
+  frame_every = max(1, int(round(1.0 / (args.fps * control_dt))))
+  writer = None
+  if args.out:
+    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+    writer = imageio.get_writer(args.out, fps=args.fps, codec="libx264",
+                                quality=7, macro_block_size=8)
+  frames = 0
+  try:
+    for step in tqdm.trange(steps, desc=f"recording {args.task}",
+                            disable=not sys.stderr.isatty()):
+      if step % frame_every == 0:
+        frame = camera_lib.render(env, camera, args.width, args.height)
+        if args.png and frames == 0:
+          imageio.imwrite(args.png, frame)
+        if writer is not None:
+          writer.append_data(frame)
+        frames += 1
+        if writer is None:
+          break
+      timestep = env.step(policy(timestep))
+      if timestep.last():
+        timestep = env.reset()
+        camera.reset()
+  finally:
+    if writer is not None:
+      writer.close()
+    env.close()
+  return frames
+
+
+def parse_args(argv=None):
+  parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+  for field in dataclasses.fields(VideoArgs):
+    flag = "--" + field.name.replace("_", "-")
+    parser.add_argument(flag, type=type(field.default), default=field.default,
+                        help=f"default: {field.default!r}")
+  return VideoArgs(**vars(parser.parse_args(argv)))
+
+
+def main(argv=None):
+  args = parse_args(argv)
+  frames = record(args)
+  for path in (args.out, args.png):
+    if path:
+      print(f"wrote {path} ({os.path.getsize(path) / 1e3:.0f} kB)")
+  print(f"{frames} frames of {args.task} with {args.n_agents} agents")
+
+
+if __name__ == "__main__":
+  main()

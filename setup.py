@@ -1,0 +1,48 @@
+"""coop-suite: embodied multi-agent cooperation with MuJoCo Ants.
+
+One package set: the dm_control task suite (`coop_suite`), the Acme-style JAX
+agents (`agents`) and the Ray runners (`runners`).
+"""
+import setuptools
+
+setuptools.setup(
+    name="coop-suite",
+    version="0.1.0",
+    description=(
+        "dm_control composer tasks and a distributed hierarchical controller "
+        "for embodied multi-agent cooperation with MuJoCo Ants."),
+    long_description=open("README.md").read(),
+    long_description_content_type="text/markdown",
+    packages=setuptools.find_packages(include=["coop_suite*", "agents*", "runners*"]),
+    package_data={
+        "coop_suite": ["entities/assets/*.xml"],
+        "agents": ["lowlevel/weights/*"],
+    },
+    python_requires=">=3.10",
+    install_requires=[
+        # dm-control 1.0.50 is built against mujoco 3.x; mujoco 4.0 fails at
+        # load with "'MjModel' object has no attribute 'flex_vertedge'".
+        "dm-control==1.0.50",
+        "mujoco>=3.17,<3.18",
+        "dm-env",
+        "numpy",
+        "jax",
+        "flax",
+        "optax",
+        "ray[default]>=2.9",
+        "imageio",
+        "imageio-ffmpeg",
+        "tqdm",
+        "matplotlib",
+        "tensorboardX",
+    ],
+    extras_require={
+        "pettingzoo": ["pettingzoo>=1.24", "gymnasium>=0.29"],
+        "test": ["pytest", "pettingzoo>=1.24", "gymnasium>=0.29"],
+    },
+    entry_points={
+        "console_scripts": [
+            "coop-video=runners.video:main",
+        ],
+    },
+)
