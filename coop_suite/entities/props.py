@@ -1,8 +1,10 @@
 """Free-moving task objects: the cylinder to transport and the bridging stone.
 
-Both are plain rigid bodies on a free joint. Masses are chosen so that one
-Ant can barely nudge them and two or more can push them (an Ant weighs about
-8 kg and its legs give roughly 50-100 N of traction on flat ground).
+Both are plain rigid bodies on a free joint. An Ant weighs 12.4 kg and its
+legs give it at most ~120 N of traction on the floor (friction 1). The
+cylinder (20 kg, friction 0.4: ~80 N to slide) barely moves for one Ant and
+moves for several; the stone (12 kg: ~47 N) moves for one pusher, faster for
+two. Measured with scripted pushes in `tests/test_physics.py`.
 """
 
 from dm_control import composer
@@ -16,7 +18,10 @@ class _FreeProp(composer.Entity):
   def _build(self, name, geom_kwargs):
     self._mjcf_root = mjcf.RootElement(model=name)
     self._body = self._mjcf_root.worldbody.add("body", name="body")
-    self._geom = self._body.add("geom", name="geom", group=0, **geom_kwargs)
+    # priority=1: contacts use this geom's friction instead of MuJoCo's
+    # default maximum of both geoms' (the floor's 1.0 would glue it down).
+    self._geom = self._body.add("geom", name="geom", group=0, priority=1,
+                                **geom_kwargs)
     self._body_id = None
 
   @property
@@ -41,10 +46,14 @@ class _FreeProp(composer.Entity):
 
 
 class Cylinder(_FreeProp):
-  """An upright cylinder (default 0.5 m radius, 0.5 m tall, 20 kg)."""
+  """An upright cylinder (default 0.6 m radius, 0.8 m tall, 20 kg).
 
-  def _build(self, name="cylinder", radius=0.5, height=0.5, mass=20.0,
-             friction=0.6, rgba=(0.85, 0.2, 0.2, 1.0)):
+  Taller than an Ant's torso so that Ants push it instead of climbing it,
+  and wide enough that pushing at torso height slides it before it tips.
+  """
+
+  def _build(self, name="cylinder", radius=0.6, height=0.8, mass=20.0,
+             friction=0.4, rgba=(0.85, 0.2, 0.2, 1.0)):
     self.radius = radius
     self.height = height
     super()._build(name, dict(type="cylinder", size=[radius, height / 2],
@@ -58,7 +67,7 @@ class Stone(_FreeProp):
   Its size is [length along the trench (y), width across it (x), height].
   """
 
-  def _build(self, name="stone", size=(1.6, 1.9, 1.0), mass=20.0,
+  def _build(self, name="stone", size=(1.6, 1.9, 1.0), mass=12.0,
              friction=0.4, rgba=(0.45, 0.45, 0.5, 1.0)):
     self.size = np.asarray(size, dtype=np.float64)
     half = [size[1] / 2, size[0] / 2, size[2] / 2]

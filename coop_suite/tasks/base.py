@@ -73,7 +73,12 @@ class CoopTask(composer.Task):
       counts[kind] = index + 1
       walker = Ant(name=f"{kind}_{index}",
                    rgba=SPECIES_COLOURS.get(kind, SPECIES_COLOURS["ant"]))
-      arena.add_free_entity(walker)
+      frame = arena.add_free_entity(walker)
+      # Distinct default poses: MuJoCo runs forward kinematics at qpos0 when
+      # the model is compiled, and 16 ants stacked at the origin would create
+      # tens of thousands of contacts there (mjWARN_CNSTRFULL at time 0).
+      slot = len(self._walkers)
+      frame.pos = (3.0 * (slot % 4), 3.0 * (slot // 4), 2.0)
       self._walkers.append(walker)
     arena.mjcf_model.size.memory = (
         f"{int(4 + np.ceil(config.memory_mb_per_agent * len(species)))}M")

@@ -51,7 +51,7 @@ class RavineConfig(base.TaskConfig):
   """Trench length (m)."""
   stone_length: float = 1.6
   """Stone extent along the trench (m)."""
-  stone_mass: float = 20.0
+  stone_mass: float = 12.0
   """Stone mass (kg)."""
   start_gap: float = 2.0
   """Distance from the crossers' start line to the near edge (m)."""

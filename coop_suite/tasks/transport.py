@@ -35,11 +35,12 @@ class TransportConfig(base.TaskConfig):
   """The cylinder's centre must be this close to the target (m)."""
   rest_speed: float = 0.3
   """...and move slower than this (m/s) to count as resting."""
-  start_radius: float = 2.5
+  start_radius: float = 3.0
   """Minimum distance of the agents' start ring from the cylinder (m)."""
   cylinder_mass: float = 20.0
   """Cylinder mass (kg): heavy enough to need more than one Ant."""
-  cylinder_radius: float = 0.5
+  cylinder_radius: float = 0.6
+  """Cylinder radius (m); it is 0.8 m tall."""
 
 
 class Transport(base.CoopTask):

@@ -1,0 +1,83 @@
+"""Interfaces between actors, learners and the processes that run them.
+
+These follow Acme's `acme/core.py` so that a runner can drive any agent the same
+way: actors step environments and pull parameters from a `VariableSource`
+(usually the learner, possibly behind a Ray handle); learners consume data in
+`step()` and publish parameters through `get_variables()`.
+
+Deviation from Acme: Acme's `Saveable.save()` returns an in-memory state and a
+separate TensorFlow Checkpointer writes it. We have no Checkpointer, so
+`save(path)` / `restore(path)` take a file path and the learner writes the file
+itself (atomically, see `agents.ppo.learning`).
+"""
+import abc
+import itertools
+from typing import Any, Optional, Sequence
+
+
+class VariableSource(abc.ABC):
+  """Something that publishes named variables (parameters, statistics)."""
+
+  @abc.abstractmethod
+  def get_variables(self, names: Sequence[str]) -> list[Any]:
+    """Returns the current value of each named variable, in `names` order.
+
+    Args:
+      names: variable collection names, e.g. `["params", "normalizer"]`.
+
+    Returns:
+      One pytree per name.
+    """
+
+
+class Actor(abc.ABC):
+  """Acts in (a batch of) environments and records what it saw.
+
+  The calling sequence for one rollout segment is
+  `observe_first(ts)`, then repeatedly `a = select_action(ts.observation)`,
+  `ts = env.step(a)`, `observe(a, ts)`; `update()` between segments.
+  """
+
+  @abc.abstractmethod
+  def select_action(self, observation: Any) -> Any:
+    """Samples an action for `observation` with the actor's own parameters."""
+
+  @abc.abstractmethod
+  def observe_first(self, timestep: Any) -> None:
+    """Records the first timestep of a segment (only its observation)."""
+
+  @abc.abstractmethod
+  def observe(self, action: Any, next_timestep: Any) -> None:
+    """Records the transition that `action` caused."""
+
+  @abc.abstractmethod
+  def update(self, wait: bool = False) -> None:
+    """Pulls fresh variables from the actor's `VariableSource`.
+
+    Args:
+      wait: block until the new variables have arrived (meaningful when the
+        source is remote; in-process sources are always synchronous).
+    """
+
+
+class Learner(VariableSource):
+  """Consumes data and improves parameters; the source actors pull from."""
+
+  @abc.abstractmethod
+  def step(self) -> Any:
+    """Performs one learning update (for PPO: one rollout, all epochs)."""
+
+  def run(self, num_steps: Optional[int] = None) -> None:
+    """Calls `step()` `num_steps` times, or forever when `num_steps` is None."""
+    iterator = range(num_steps) if num_steps is not None else itertools.count()
+    for _ in iterator:
+      self.step()
+
+  def save(self, path: str) -> None:
+    """Writes everything needed to resume training to `path`."""
+    raise NotImplementedError(f'{type(self).__name__} does not implement save.')
+
+  def restore(self, path: str) -> None:
+    """Resumes from a file written by `save`."""
+    raise NotImplementedError(
+        f'{type(self).__name__} does not implement restore.')

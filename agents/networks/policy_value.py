@@ -1,0 +1,116 @@
+"""Feed-forward policy and value networks as a dataclass of pure functions.
+
+Acme / Brax style: the networks object holds no parameters. `init(key)` creates
+them and every other field is a pure function of `(params, inputs)`, so the
+learner can `jax.jit` and `jax.grad` through them and an actor can run them
+with any parameter version it pulled.
+
+Observations arrive already normalised (see `agents.normalization`); shapes
+are [..., obs_dim] with any leading axes ([B], [T, B], ...).
+
+A recurrent variant (the hierarchy's GRU middle layer) will produce the same
+`dist_params` layout and reuse `NormalTanhDistribution` and the PPO loss.
+"""
+import dataclasses
+from typing import Any, Callable, Optional, Sequence
+
+import jax
+import jax.numpy as jnp
+
+from agents.networks import distributions
+from agents.networks import mlp
+
+Params = Any  # A pytree: {'policy': ..., 'value': ...} of Flax variables.
+InferenceFn = Callable[[Params, jax.Array, jax.Array, bool],
+                       tuple[jax.Array, dict[str, jax.Array]]]
+
+
+@dataclasses.dataclass(frozen=True)
+class PolicyValueNetworks:
+  """Actor-critic networks for PPO.
+
+  Attributes:
+    init: key -> params.
+    apply_policy: (params, obs [..., obs_dim]) -> dist_params [..., 2A].
+    apply_value: (params, obs [..., obs_dim]) -> value [...].
+    distribution: how to read `dist_params` (sample, log_prob, entropy).
+    observation_size: obs_dim the networks expect.
+  """
+  init: Callable[[jax.Array], Params]
+  apply_policy: Callable[[Params, jax.Array], jax.Array]
+  apply_value: Callable[[Params, jax.Array], jax.Array]
+  distribution: distributions.NormalTanhDistribution
+  observation_size: int
+
+
+def make_policy_value_networks(
+    obs_dim: int,
+    action_dim: int,
+    policy_hidden: Sequence[int] = (256, 256),
+    value_hidden: Sequence[int] = (256, 256),
+    activation: str = 'swish',
+) -> PolicyValueNetworks:
+  """Separate policy and value MLPs (no shared torso, as in Brax PPO).
+
+  Separate torsos keep the value loss's large gradients away from the policy
+  features; the policy head starts with small weights so that the initial
+  policy is close to N(0, softplus(0)) in raw-action space, whatever the input.
+  """
+  distribution = distributions.NormalTanhDistribution(action_dim)
+  policy_module = mlp.MLP(
+      layer_sizes=(*policy_hidden, distribution.param_size),
+      activation=activation, final_kernel_scale=0.01)
+  value_module = mlp.MLP(layer_sizes=(*value_hidden, 1), activation=activation)
+  dummy_obs = jnp.zeros((1, obs_dim), jnp.float32)
+
+  def init(key: jax.Array) -> Params:
+    policy_key, value_key = jax.random.split(key)
+    return {'policy': policy_module.init(policy_key, dummy_obs),
+            'value': value_module.init(value_key, dummy_obs)}
+
+  def apply_policy(params: Params, obs: jax.Array) -> jax.Array:
+    return policy_module.apply(params['policy'], obs)
+
+  def apply_value(params: Params, obs: jax.Array) -> jax.Array:
+    return jnp.squeeze(value_module.apply(params['value'], obs), axis=-1)
+
+  return PolicyValueNetworks(
+      init=init, apply_policy=apply_policy, apply_value=apply_value,
+      distribution=distribution, observation_size=obs_dim)
+
+
+def make_inference_fn(
+    networks: PolicyValueNetworks,
+    action_bounds: Optional[tuple[Any, Any]] = None,
+) -> InferenceFn:
+  """Builds `fn(params, obs, key, deterministic) -> (action, extras)`.
+
+  Args:
+    networks: the policy/value networks.
+    action_bounds: optional (low, high) of a Box action spec ([A] or scalars);
+      actions are rescaled from [-1, 1] onto it. None keeps [-1, 1].
+
+  The returned function maps obs [..., obs_dim] to action [..., A] and extras
+  `{'raw_action' [..., A] (pre-tanh, what the learner needs), 'log_prob' [...],
+  'value' [...]}`. `deterministic` (a Python bool, static under jit) acts with
+  the Gaussian's mean; `key` is then unused.
+  """
+  distribution = networks.distribution
+
+  def inference(params, obs, key, deterministic=False):
+    dist_params = networks.apply_policy(params, obs)
+    if deterministic:
+      raw_action = distribution.mode_raw(dist_params)
+    else:
+      raw_action = distribution.sample_raw(dist_params, key)
+    action = distribution.squash(raw_action)
+    if action_bounds is not None:
+      action = distributions.rescale(action, *action_bounds)
+    extras = {
+        'raw_action': raw_action,
+        'log_prob': distribution.log_prob(dist_params, raw_action),
+        'value': networks.apply_value(params, obs),
+    }
+    return action, extras
+
+  return inference

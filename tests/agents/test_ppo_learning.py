@@ -1,0 +1,117 @@
+"""PPOLearner: one update, checkpoints, and a bandit it must solve."""
+import collections
+import os
+
+import jax
+import numpy as np
+import pytest
+
+from agents.ppo import builder as ppo_builder
+from agents.ppo import config as ppo_config
+from agents.ppo import types
+
+OBS_DIM, ACTION_DIM, T, B = 3, 2, 5, 8
+SMALL = dict(policy_hidden=(16,), value_hidden=(16,))
+
+
+def _random_rollout(seed=0, with_truncation=True):
+  rng = np.random.default_rng(seed)
+  f32 = lambda *shape: rng.normal(size=shape).astype(np.float32)
+  discount = (rng.uniform(size=(T, B)) > 0.2).astype(np.float32)
+  truncation = ((rng.uniform(size=(T, B)) > 0.9) * discount).astype(np.float32)
+  return types.Rollout(
+      observation=f32(T + 1, B, OBS_DIM) * 3 + 1,
+      raw_action=f32(T, B, ACTION_DIM),
+      log_prob=f32(T, B) - 2, reward=f32(T, B), discount=discount,
+      truncation=truncation if with_truncation else None)
+
+
+def _make_learner(seed=0, rollouts=None, **overrides):
+  builder = ppo_builder.PPOBuilder(
+      ppo_config.PPOConfig(seed=seed, **{**SMALL, **overrides}))
+  networks = builder.make_networks(OBS_DIM, ACTION_DIM)
+  return builder.make_learner(networks, rollouts)
+
+
+def test_one_update_is_finite_and_changes_parameters():
+  learner = _make_learner(
+      rollouts=iter([_random_rollout(with_truncation=False)]))
+  before = learner.get_variables(['params'])[0]
+  metrics = learner.step()  # Takes the iterator's rollout.
+  for name, value in metrics.items():
+    assert np.isfinite(value), name
+  after, normalizer, step = learner.get_variables(
+      ['params', 'normalizer', 'step'])
+  changed = jax.tree.map(lambda a, b: not np.array_equal(a, b), before, after)
+  assert all(jax.tree.leaves(changed))
+  assert int(step) == 1 and float(normalizer.count) == T * B
+
+
+def test_bad_requests_are_rejected_with_clear_errors():
+  learner = _make_learner()
+  with pytest.raises(ValueError, match='divisible by num_minibatches=3'):
+    _make_learner(num_minibatches=3).step(_random_rollout())
+  with pytest.raises(ValueError, match='Unknown variable'):
+    learner.get_variables(['weights'])
+  with pytest.raises(ValueError, match='needs a rollout'):
+    learner.step()
+
+
+def test_save_restore_round_trips_exactly(tmp_path):
+  learner = _make_learner()
+  learner.step(_random_rollout(0))
+  saved = jax.device_get(learner.state)
+  path = str(tmp_path / 'ckpt' / 'learner.msgpack')
+  learner.save(path)
+  assert os.listdir(tmp_path / 'ckpt') == ['learner.msgpack']  # No tmp left.
+  learner.step(_random_rollout(1))
+  after_saved = jax.device_get(learner.state)
+
+  learner.restore(path)
+  for a, b in zip(jax.tree.leaves(saved), jax.tree.leaves(learner.state)):
+    np.testing.assert_array_equal(a, b)
+  assert int(learner.state.step) == 1
+  # Restored state, same data: training continues identically.
+  learner.step(_random_rollout(1))
+  for a, b in zip(jax.tree.leaves(after_saved), jax.tree.leaves(learner.state)):
+    np.testing.assert_array_equal(a, b)
+
+  other = _make_learner(seed=1)  # A fresh process restoring the file.
+  other.restore(path)
+  for a, b in zip(jax.tree.leaves(saved), jax.tree.leaves(other.state)):
+    np.testing.assert_array_equal(a, b)
+  with pytest.raises(ValueError, match='other shapes'):
+    _make_learner(policy_hidden=(8,)).restore(path)
+
+
+TimeStep = collections.namedtuple(
+    'TimeStep', ['step_type', 'reward', 'discount', 'observation'])
+
+
+def test_ppo_solves_a_one_step_bandit():
+  # Constant observation, reward -|a - 0.5|: the policy's mean must move from
+  # tanh(~0) = 0 to about 0.5. Each episode is one step and terminates.
+  num_envs = 64
+  config = ppo_config.PPOConfig(
+      learning_rate=3e-3, entropy_cost=1e-3, num_epochs=2, num_minibatches=2,
+      policy_hidden=(8,), value_hidden=(8,))
+  builder = ppo_builder.PPOBuilder(config)
+  networks = builder.make_networks(1, 1)
+  learner = builder.make_learner(networks)
+  actor = builder.make_actor(networks, learner)
+  evaluator = builder.make_actor(networks, learner, deterministic=True)
+  observation = np.ones((num_envs, 1), np.float32)
+  last = TimeStep(np.full(num_envs, 2), None, np.zeros(num_envs), observation)
+
+  initial_mean = float(evaluator.select_action(observation[:1])[0, 0])
+  actor.observe_first(last)
+  for _ in range(60):
+    action = actor.select_action(observation)
+    actor.observe(action, last._replace(reward=-np.abs(action[:, 0] - 0.5)))
+    learner.step(actor.take_rollout())
+    actor.update()
+  evaluator.update()
+  final_mean = float(evaluator.select_action(observation[:1])[0, 0])
+
+  assert abs(initial_mean) < 0.1
+  assert abs(final_mean - 0.5) < 0.05, final_mean

@@ -1,0 +1,175 @@
+"""Reward terms and success on hand-placed states, and episode boundaries."""
+
+import numpy as np
+import pytest
+
+import coop_suite
+from coop_suite.tasks import layouts
+from coop_suite.tasks import rewards
+
+ZERO = np.zeros((1, 8))
+
+
+def _zeros(env):
+  return np.zeros((env.n_agents, 8))
+
+
+def test_reward_functions_by_hand():
+  # 10 / (1 + 4) = 2.
+  assert rewards.inverse_distance(10.0, 4.0) == pytest.approx(2.0)
+  # |(3, 4)| = 5.
+  assert rewards.planar_distance([3.0, 4.0], [0.0, 0.0]) == pytest.approx(5.0)
+  # Command 0.5 m/s along x, moving 0.25 m/s along x: 5 * 0.125 / 0.25 = 2.5.
+  assert rewards.velocity_tracking(5.0, [0.25, 0.0], [0.5, 0.0]) == (
+      pytest.approx(2.5))
+  # Faster than commanded saturates at the scale.
+  assert rewards.velocity_tracking(5.0, [2.0, 0.0], [0.5, 0.0]) == (
+      pytest.approx(5.0))
+  # Zero command: standing still pays fully, 0.25 m/s pays half.
+  assert rewards.velocity_tracking(5.0, [0.0, 0.0], [0.0, 0.0]) == 5.0
+  assert rewards.velocity_tracking(5.0, [0.25, 0.0], [0.0, 0.0]) == (
+      pytest.approx(2.5))
+
+
+def test_transport_success_pays_everyone_and_ends():
+  env = coop_suite.load("transport", 3, seed=1)
+  env.reset()
+  task, physics = env.task, env.physics
+  target = task.arena.target_position
+  layouts.place_prop(task.cylinder, physics, [*target, task.cylinder.height / 2])
+  timestep = env.step(_zeros(env))
+  assert timestep.last()
+  assert float(timestep.discount) == 0.0
+  cylinder = task.cylinder.position(physics)[:2]
+  for i, reward in enumerate(timestep.reward):
+    agent = task.walkers[i].torso_position(physics)[:2]
+    expected = (10 / (1 + np.linalg.norm(cylinder - target))
+                + 5 / (1 + np.linalg.norm(agent - cylinder))
+                + 5 / (1 + np.linalg.norm(agent - target)) + 50)
+    assert reward == pytest.approx(expected, rel=1e-5)
+  metrics = env.episode_metrics()
+  assert metrics["success"] is True
+  assert metrics["reward/success"] == 50.0
+
+
+def test_transport_moving_cylinder_is_not_resting():
+  env = coop_suite.load("transport", 2, seed=1)
+  env.reset()
+  task, physics = env.task, env.physics
+  layouts.place_prop(task.cylinder, physics,
+                     [*task.arena.target_position, task.cylinder.height / 2])
+  task.cylinder.set_velocity(physics, velocity=[3.0, 0.0, 0.0])
+  timestep = env.step(_zeros(env))
+  assert timestep.mid()
+  assert not env.episode_metrics()["success"]
+
+
+def test_corridor_crossing_pays_all_once_and_success_when_all_crossed():
+  env = coop_suite.load("corridor", 2, seed=0)
+  env.reset()
+  task, physics = env.task, env.physics
+  rng = np.random.RandomState(0)
+  finish = task.arena.finish_x
+  layouts.place(task.walkers[0], physics, [finish + 1.0, 0.0], 0.0, rng)
+  first = env.step(_zeros(env))
+  assert first.mid()
+  assert all(r > 50.0 for r in first.reward)
+  second = env.step(_zeros(env))
+  assert all(r < 50.0 for r in second.reward)  # Paid once per crossing.
+  assert env.episode_metrics()["crossed"] == 1
+  layouts.place(task.walkers[1], physics, [finish + 1.0, 3.0], 0.0, rng)
+  last = env.step(_zeros(env))
+  assert last.last() and float(last.discount) == 0.0
+  assert all(r > 50.0 for r in last.reward)
+  assert env.episode_metrics()["success"] is True
+
+
+def test_ravine_joint_crossing_pays_pushers_too():
+  env = coop_suite.load("ravine", 2, seed=0)
+  env.reset()
+  task, physics = env.task, env.physics
+  layouts.place(task.walkers[0], physics, [task.arena.finish_x + 0.5, 0.0],
+                0.0, np.random.RandomState(0))
+  timestep = env.step(_zeros(env))
+  assert timestep.last() and float(timestep.discount) == 0.0
+  assert len(timestep.reward) == 4
+  assert all(r >= 50.0 for r in timestep.reward)
+  assert env.episode_metrics()["success"] is True
+
+
+def test_ravine_fall_penalty_once_and_failure_when_all_fell():
+  env = coop_suite.load("ravine", 1, stage="crossers", seed=0)
+  env.reset()
+  task, physics = env.task, env.physics
+  stone_y = task.stone.position(physics)[1]
+  y = stone_y + 4.0 if stone_y < 0 else stone_y - 4.0
+  layouts.place(task.walkers[0], physics, [task.arena.ravine_x, y], 0.0,
+                np.random.RandomState(0), ground_z=-task.arena.depth)
+  timestep = env.step(ZERO)
+  assert timestep.last() and float(timestep.discount) == 0.0
+  assert env.episode_metrics()["reward/fall"] == -20.0
+  assert env.episode_metrics()["failure"] is True
+
+
+def test_ravine_pushers_are_paid_for_bridging_the_nearest_crosser():
+  env = coop_suite.load("ravine", 3, stage="pushers", seed=0)
+  env.reset()
+  task, physics = env.task, env.physics
+  markers = task._markers  # pylint: disable=protected-access
+  nearest = markers[np.argmin(np.abs(task.arena.near_edge_x - markers[:, 0]))]
+  timestep = env.step(_zeros(env))
+  error = abs(task.stone.position(physics)[1] - nearest[1])
+  for reward in timestep.reward:
+    assert reward == pytest.approx(5 / (1 + error), rel=1e-5)
+
+
+def test_walk_to_target_draws_a_new_target_when_reached():
+  env = coop_suite.load("walk_to_target", seed=0)
+  timestep = env.reset()
+  offset = timestep.observation[0]["command/target"]
+  assert 2.0 <= np.linalg.norm(offset) <= 6.0
+  task, physics = env.task, env.physics
+  old = task.arena.target_position.copy()
+  layouts.place(task.walker, physics, old, 0.0, np.random.RandomState(0))
+  timestep = env.step(ZERO)
+  assert env.episode_metrics()["targets_reached"] == 1
+  assert not np.allclose(task.arena.target_position, old)
+  assert timestep.mid()
+
+
+def test_walk_to_target_fall_ends_with_zero_discount():
+  env = coop_suite.load("walk_to_target", seed=0)
+  env.reset()
+  walker = env.task.walker
+  walker.set_pose(env.physics, position=[0, 0, 0.3],
+                  quaternion=[0.0, 1.0, 0.0, 0.0])  # Upside down.
+  timestep = env.step(ZERO)
+  assert timestep.last() and float(timestep.discount) == 0.0
+  assert env.episode_metrics()["failure"] is True
+
+
+def test_walk_velocity_reward_terms():
+  env = coop_suite.load("walk_velocity", seed=3)
+  env.reset()
+  env.task.set_command(env.physics, [0.5, 0.0])
+  timestep = env.step(ZERO)
+  velocity = env.task.walker.world_velocity(env.physics)[:2]
+  expected_velocity = rewards.velocity_tracking(5.0, velocity, [0.5, 0.0])
+  metrics = env.episode_metrics()
+  assert metrics["reward/velocity"] == pytest.approx(expected_velocity)
+  assert metrics["reward/alive"] == 0.5
+  assert metrics["reward/action_cost"] == 0.0
+  assert timestep.reward[0] == pytest.approx(
+      sum(metrics[k] for k in metrics if k.startswith("reward/")), rel=1e-5)
+
+
+def test_time_limit_is_a_truncation():
+  env = coop_suite.load("corridor", 2, seed=0, time_limit=0.5)
+  timestep = env.reset()
+  steps = 0
+  while not timestep.last():
+    timestep = env.step(_zeros(env))
+    steps += 1
+  assert steps == 10
+  assert float(timestep.discount) == 1.0
+  assert coop_suite.is_truncation(timestep)

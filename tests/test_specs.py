@@ -1,0 +1,166 @@
+"""The environment contract of DESIGN.md section 2, for every task."""
+
+import dm_env
+import numpy as np
+import pytest
+
+import coop_suite
+
+CASES = [("transport", 1), ("transport", 4), ("transport", 7),
+         ("corridor", 1), ("corridor", 5), ("ravine", 1), ("ravine", 3),
+         ("walk_to_target", 1), ("walk_velocity", 1)]
+
+
+def _species_count(env):
+  return len(env.task.species)
+
+
+@pytest.mark.parametrize("task,n_agents", CASES)
+def test_specs_match_observations(task, n_agents):
+  env = coop_suite.load(task, n_agents, seed=0)
+  n = _species_count(env)
+  action_specs = env.action_spec()
+  assert isinstance(action_specs, list) and len(action_specs) == n
+  for spec in action_specs:
+    assert spec.shape == (8,)
+    np.testing.assert_array_equal(spec.minimum, -1.0)
+    np.testing.assert_array_equal(spec.maximum, 1.0)
+  obs_specs = env.observation_spec()
+  assert isinstance(obs_specs, list) and len(obs_specs) == n
+  assert len(env.reward_spec()) == n
+
+  timestep = env.reset()
+  assert timestep.step_type == dm_env.StepType.FIRST
+  for _ in range(3):
+    timestep = env.step(np.random.uniform(-1, 1, (n, 8)))
+  assert len(timestep.observation) == n
+  for spec, observation in zip(obs_specs, timestep.observation):
+    assert set(spec) == set(observation)
+    for key, value in observation.items():
+      assert key.split("/")[0] in ("proprio", "extero", "command"), key
+      spec[key].validate(value)
+  assert len(timestep.reward) == n
+  for reward, spec in zip(timestep.reward, env.reward_spec()):
+    assert np.shape(reward) == ()
+    assert np.asarray(reward).dtype == spec.dtype
+    assert np.isfinite(reward)
+  env.discount_spec().validate(np.asarray(timestep.discount, np.float32))
+
+
+@pytest.mark.parametrize("task", ["transport", "corridor", "ravine"])
+def test_exteroception_size_does_not_depend_on_population(task):
+  sizes = []
+  for n_agents in (1, 2, 5):
+    env = coop_suite.load(task, n_agents, seed=0)
+    spec = env.observation_spec()[0]
+    sizes.append({k: v.shape for k, v in spec.items()})
+  assert sizes[0] == sizes[1] == sizes[2]
+
+
+def test_observation_groups():
+  """Locomotion tasks expose commands; cooperative ones exteroception."""
+  walk = coop_suite.load("walk_to_target").observation_spec()[0]
+  assert "command/target" in walk
+  assert not any(k.startswith("extero/") for k in walk)
+  velocity = coop_suite.load("walk_velocity").observation_spec()[0]
+  assert "command/velocity" in velocity
+  transport = coop_suite.load("transport", 4).observation_spec()[0]
+  assert not any(k.startswith("command/") for k in transport)
+  for key in ("extero/teammates", "extero/teammates_mask", "extero/heights",
+              "extero/cylinder", "extero/target", "proprio/joints_pos"):
+    assert key in transport
+  assert set(k for k in walk if k.startswith("proprio/")) == set(
+      k for k in transport if k.startswith("proprio/"))
+
+
+def test_teammate_mask_pads_missing_neighbours():
+  alone = coop_suite.load("transport", 1, seed=0, k_neighbours=2).reset()
+  np.testing.assert_array_equal(alone.observation[0]["extero/teammates_mask"],
+                                [0.0, 0.0])
+  np.testing.assert_array_equal(alone.observation[0]["extero/teammates"], 0.0)
+  pair = coop_suite.load("transport", 2, seed=0, k_neighbours=2).reset()
+  np.testing.assert_array_equal(pair.observation[0]["extero/teammates_mask"],
+                                [1.0, 0.0])
+
+
+def test_nearest_teammate_is_egocentric():
+  env = coop_suite.load("transport", 3, seed=0)
+  timestep = env.reset()
+  physics = env.task.walkers
+  positions = np.array([w.torso_position(env.physics)[:2] for w in physics])
+  yaw = env.task.walkers[0].heading(env.physics)
+  distances = np.linalg.norm(positions[1:] - positions[0], axis=1)
+  nearest = positions[1 + int(np.argmin(distances))] - positions[0]
+  rotation = np.array([[np.cos(yaw), np.sin(yaw)], [-np.sin(yaw), np.cos(yaw)]])
+  np.testing.assert_allclose(timestep.observation[0]["extero/teammates"],
+                             rotation @ nearest, atol=1e-9)
+
+
+def test_species_and_agent_order():
+  env = coop_suite.load("ravine", 3, n_pushers=2, seed=0)
+  assert env.task.species == ("crosser",) * 3 + ("pusher",) * 2
+  pushers_only = coop_suite.load("ravine", 3, stage="pushers", seed=0)
+  assert pushers_only.task.species == ("pusher", "pusher")
+  crossers_only = coop_suite.load("ravine", 2, stage="crossers", seed=0)
+  assert crossers_only.task.species == ("crosser", "crosser")
+  assert coop_suite.load("corridor", 2).task.species == ("ant", "ant")
+
+
+def test_same_seed_same_episode_and_different_seed_differs():
+  def rollout(seed):
+    env = coop_suite.load("transport", 3, seed=seed)
+    rng = np.random.RandomState(0)
+    first = env.reset().observation
+    out = [np.concatenate([v.ravel() for v in agent.values()])
+           for agent in first]
+    for _ in range(10):
+      timestep = env.step(rng.uniform(-1, 1, (3, 8)))
+    out += [np.concatenate([v.ravel() for v in agent.values()])
+            for agent in timestep.observation]
+    return np.concatenate(out), np.array(timestep.reward)
+
+  a, reward_a = rollout(7)
+  b, reward_b = rollout(7)
+  c, _ = rollout(8)
+  np.testing.assert_array_equal(a, b)
+  np.testing.assert_array_equal(reward_a, reward_b)
+  assert not np.allclose(a, c)
+
+
+def test_episode_metrics_report_reward_terms():
+  env = coop_suite.load("transport", 2, seed=0)
+  env.reset()
+  total = np.zeros(2)
+  for _ in range(5):
+    total += np.array(env.step(np.zeros((2, 8))).reward, dtype=np.float64)
+  metrics = env.episode_metrics()
+  assert metrics["success"] is False
+  terms = [k for k in metrics if k.startswith("reward/")]
+  assert {"reward/cylinder_target", "reward/agent_cylinder",
+          "reward/agent_target", "reward/success"} <= set(terms)
+  assert metrics["return"] == pytest.approx(np.mean(total), rel=1e-5)
+  assert sum(metrics[k] for k in terms) == pytest.approx(metrics["return"],
+                                                         rel=1e-6)
+
+
+def test_global_state_has_fixed_size():
+  env = coop_suite.load("transport", 4, seed=0)
+  env.reset()
+  state = env.task.global_state(env.physics)
+  assert state.shape == (4 * 7 + 4,)
+  env.step(np.zeros((4, 8)))
+  assert env.task.global_state(env.physics).shape == state.shape
+
+
+def test_constraint_memory_is_sized_for_many_agents():
+  """16 ants in a heap would overflow MuJoCo's default arena memory."""
+  import mujoco  # pylint: disable=g-import-not-at-top
+  env = coop_suite.load("transport", 16, seed=0)
+  env.reset()
+  rng = np.random.RandomState(0)
+  for _ in range(40):
+    env.step(rng.uniform(-1, 1, (16, 8)))
+  warnings = env.physics.data.warning
+  assert warnings[mujoco.mjtWarning.mjWARN_CNSTRFULL].number == 0
+  assert warnings[mujoco.mjtWarning.mjWARN_CONTACTFULL].number == 0
+  assert not env.physics_diverged
