@@ -8,6 +8,7 @@
 See `docs/observations.md` for every observation with its frame and units.
 """
 
+import dataclasses
 import numbers
 import os
 
@@ -67,7 +68,7 @@ def load(task, n_agents=None, *, seed=None, time_limit=None, **kwargs):
   if seed is not None and (isinstance(seed, bool)
                            or not isinstance(seed, numbers.Integral)):
     raise TypeError(f"seed must be an integer or None, got {seed!r}.")
-  config_fields = {f.name for f in _fields(config_cls)}
+  config_fields = {f.name for f in dataclasses.fields(config_cls)}
   config_kwargs = {k: v for k, v in kwargs.items() if k in config_fields}
   task_kwargs = {k: v for k, v in kwargs.items() if k not in config_fields}
   allowed_task_kwargs = getattr(cls, "TASK_OPTIONS", ())
@@ -95,7 +96,3 @@ def _check_task(task):
     raise ValueError(f"Unknown task {task!r}; choose one of {sorted(TASKS)}.")
   return task
 
-
-def _fields(config_cls):
-  import dataclasses  # pylint: disable=g-import-not-at-top
-  return dataclasses.fields(config_cls)

@@ -102,10 +102,12 @@ class Ravine(base.CoopTask):
     """World xy of the crosser nearest the ravine that has not fallen in."""
     def compute():
       xy = self._crosser_positions(physics)
-      standing = ~self._fallen[self._is_crosser] if self.stage != "pushers" \
-          else np.ones(len(xy), dtype=bool)
-      candidates = np.where(standing[:, None], xy, xy - [1e3, 0.0])
-      gap = np.abs(self._arena.near_edge_x - candidates[:, 0])
+      if self.stage == "pushers":
+        standing = np.ones(len(xy), dtype=bool)
+      else:
+        standing = ~self._fallen[self._is_crosser]
+      # Fallen crossers no longer need a bridge: push them out of the race.
+      gap = np.abs(self._arena.near_edge_x - xy[:, 0]) + 1e3 * ~standing
       return xy[int(np.argmin(gap))]
     return self.per_state("nearest_crosser", physics, compute)
 
