@@ -85,10 +85,17 @@ def load(task, n_agents=None, *, seed=None, time_limit=None, **kwargs):
                          random_state=np.random.RandomState(seed))
 
 
-def pettingzoo_env(task, n_agents=None, **load_kwargs):
-  """A PettingZoo `ParallelEnv` around `load(task, n_agents, **load_kwargs)`."""
+def pettingzoo_env(task, n_agents=None, *, flatten=False, render_mode=None,
+                   render_size=(480, 640), **load_kwargs):
+  """A PettingZoo `ParallelEnv` around `load(task, n_agents, **load_kwargs)`.
+
+  `flatten`, `render_mode` and `render_size` go to
+  `coop_suite.wrappers.ParallelEnv`; see docs/pettingzoo.md.
+  """
   from coop_suite import wrappers  # pylint: disable=g-import-not-at-top
-  return wrappers.ParallelEnv(load(task, n_agents, **load_kwargs))
+  return wrappers.ParallelEnv(load(task, n_agents, **load_kwargs),
+                              flatten=flatten, render_mode=render_mode,
+                              render_size=render_size)
 
 
 def _check_task(task):

@@ -1,6 +1,6 @@
 """`CoopEnvironment`: a composer.Environment that checks its multi-agent input.
 
-Three things differ from a plain `composer.Environment`, each for a reason:
+These things differ from a plain `composer.Environment`, each for a reason:
 
 * Actions are validated *before* anything is stepped, so a wrong count,
   shape, dtype or a NaN raises a clear error and the environment stays

@@ -131,7 +131,7 @@ class CoopTask(composer.Task):
 
     Returns a dict with `success` (bool), `return` (mean over agents of the
     summed reward), `reward/<term>` (mean over agents of each term's sum),
-    `physics_steps` and the task's progress figures.
+    `control_steps` and the task's progress figures.
     """
     metrics = {"success": bool(self._success),
                "failure": bool(self._failure),
