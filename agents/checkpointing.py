@@ -1,0 +1,56 @@
+"""Atomic checkpoint files of a learner's training state (flax msgpack).
+
+Factored out of `agents.ppo.learning.PPOLearner.save/restore` so that every
+learner writes the same kind of file: `{'format', 'kind', 'state'}` where
+`state` is the training-state pytree as a flax state dict.
+"""
+import os
+from typing import Any
+
+from flax import serialization
+import jax
+import jax.numpy as jnp
+
+
+def save_state(path: str, state: Any, kind: str, format_version: int) -> None:
+  """Writes `state` (a pytree of arrays) to `path`, atomically.
+
+  The file is written next to `path` and moved over it with `os.replace`, so
+  a crash never leaves a truncated checkpoint behind.
+  """
+  state_dict = serialization.to_state_dict(jax.device_get(state))
+  data = serialization.msgpack_serialize(
+      {'format': format_version, 'kind': kind, 'state': state_dict})
+  directory = os.path.dirname(os.path.abspath(path))
+  os.makedirs(directory, exist_ok=True)
+  tmp_path = f'{path}.tmp-{os.getpid()}'
+  with open(tmp_path, 'wb') as f:
+    f.write(data)
+    f.flush()
+    os.fsync(f.fileno())
+  os.replace(tmp_path, path)
+
+
+def restore_state(path: str, template: Any, kind: str,
+                  format_version: int) -> Any:
+  """Reads a file written by `save_state` into the structure of `template`.
+
+  Raises ValueError when the file is of another kind or format, or holds
+  arrays of other shapes than `template` (other networks or config).
+  """
+  with open(path, 'rb') as f:
+    contents = serialization.msgpack_restore(f.read())
+  if (contents.get('format') != format_version
+      or contents.get('kind') != kind):
+    raise ValueError(f'{path} is not a {kind} checkpoint of format '
+                     f'{format_version}.')
+  try:
+    state = serialization.from_state_dict(template, contents['state'])
+  except ValueError as e:
+    raise ValueError(f'{path} holds another state structure; was it written '
+                     f'with different networks or config? ({e})') from None
+  state = jax.tree.map(jnp.asarray, state)
+  if jax.tree.map(jnp.shape, state) != jax.tree.map(jnp.shape, template):
+    raise ValueError(f'{path} holds arrays of other shapes; was it written '
+                     'with different networks or config?')
+  return state

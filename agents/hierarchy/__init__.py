@@ -1,0 +1,16 @@
+"""The hierarchical cooperative agent (paper section 4), Acme-style layout.
+
+The upper layer (UL) turns exteroception into features, the middle layer (ML,
+a GRU) turns a sequence of features into commands for the frozen lower layer
+(LL, `agents.lowlevel`), which the runner steps k times per command. This
+package trains UL + ML with recurrent PPO; the ablations of the paper are
+selected by `HierarchyConfig.agent`.
+
+config.py    HierarchyConfig: agent variant and hyper-parameters.
+types.py     SequenceBatch (what actors send) and its training form.
+modules.py   Flax modules: upper layer, resetting GRU middle layer, heads.
+networks.py  HierarchyNetworks: pure `init` / `unroll` / `step` functions.
+learning.py  Recurrent PPO update (truncated BPTT) and HierarchyLearner.
+acting.py    HierarchyActor: B agents at once, GRU state carried per row.
+builder.py   HierarchyBuilder: config -> networks -> learner / actors.
+"""

@@ -1,0 +1,260 @@
+"""Recurrent PPO for the hierarchy: truncated BPTT over stored sequences.
+
+`make_update_fn` returns the pure `update(state, batch) -> (state, metrics)`:
+statistics, one replay of every sequence for values and GAE, then epochs x
+minibatches of SGD where each minibatch re-unrolls the ML from the stored
+`initial_carry` (PureJaxRL `ppo_rnn`). Minibatches permute the batch axis B
+only, so sequences stay whole. `HierarchyLearner` wraps it with Acme's
+Learner interface and checkpoint files; it mirrors `agents.ppo.learning`.
+"""
+from typing import Any, Iterator, NamedTuple, Optional, Sequence
+
+import jax
+import jax.numpy as jnp
+import optax
+
+from agents import checkpointing
+from agents import core
+from agents import normalization
+from agents.hierarchy import config as hierarchy_config
+from agents.hierarchy import networks as hierarchy_networks
+from agents.hierarchy import types
+from agents.ppo import losses
+from agents.ppo import types as ppo_types
+
+_CHECKPOINT_FORMAT = 1
+
+
+class TrainingState(NamedTuple):
+  """Everything that changes during training (and goes into checkpoints).
+
+  Attributes:
+    params: network parameters (Flax variables).
+    opt_state: optax state of the optimiser chain.
+    normalizer: observation statistics used by the current params.
+    global_state_normalizer: global-state statistics ('mappo'; for the other
+      variants 0-dimensional and never updated).
+    step: number of updates done, int32 scalar.
+    key: PRNG key (raw uint32 [2]) for shuffling and entropy estimates.
+  """
+  params: Any
+  opt_state: optax.OptState
+  normalizer: normalization.NormalizerState
+  global_state_normalizer: normalization.NormalizerState
+  step: jax.Array
+  key: jax.Array
+
+
+def make_optimizer(
+    config: hierarchy_config.HierarchyConfig) -> optax.GradientTransformation:
+  """Adam after global-norm gradient clipping."""
+  return optax.chain(
+      optax.clip_by_global_norm(config.max_grad_norm),
+      optax.adam(config.learning_rate, eps=config.adam_epsilon))
+
+
+def make_initial_state(networks: hierarchy_networks.HierarchyNetworks,
+                       optimizer: optax.GradientTransformation,
+                       key: jax.Array) -> TrainingState:
+  """Fresh parameters, optimiser state and empty statistics."""
+  init_key, key = jax.random.split(key)
+  params = networks.init(init_key)
+  return TrainingState(
+      params=params, opt_state=optimizer.init(params),
+      normalizer=normalization.init(networks.observation_size),
+      global_state_normalizer=normalization.init(
+          networks.global_state_size or 0),
+      step=jnp.zeros((), jnp.int32), key=key)
+
+
+def _check_batch(networks, config, batch: types.SequenceBatch) -> None:
+  """Shape errors at trace time, in the user's words."""
+  steps, batch_size = batch.reward.shape
+  expected = {
+      'observation': (steps + 1, batch_size, networks.observation_size),
+      'raw_action': (steps, batch_size, networks.action_size),
+      'reset': (steps + 1, batch_size),
+      'initial_carry': (batch_size, networks.carry_size),
+  }
+  if networks.global_state_size is not None:
+    if batch.global_state is None:
+      raise ValueError("agent='mappo' needs SequenceBatch.global_state.")
+    expected['global_state'] = (steps + 1, batch_size,
+                                networks.global_state_size)
+  for name, shape in expected.items():
+    if getattr(batch, name).shape != shape:
+      raise ValueError(f'SequenceBatch.{name} has shape '
+                       f'{getattr(batch, name).shape}, expected {shape}.')
+  if batch_size % config.num_minibatches:
+    raise ValueError(
+        f'The batch size B={batch_size} must be divisible by '
+        f'num_minibatches={config.num_minibatches}.')
+
+
+def make_update_fn(networks: hierarchy_networks.HierarchyNetworks,
+                   config: hierarchy_config.HierarchyConfig,
+                   optimizer: optax.GradientTransformation):
+  """Builds the pure `update(state, batch) -> (state, metrics)`; jit it.
+
+  `batch` is a `types.SequenceBatch` of T commands of B agents. Metrics are
+  means over all SGD steps (see `agents.ppo.losses.ppo_loss`).
+  """
+  preprocess = normalization.make_preprocess_fn(
+      config.normalize_observations, config.observation_clip)
+  uses_global_state = networks.global_state_size is not None
+
+  def make_training_batch(params, normalizer, gs_normalizer, batch):
+    observation = preprocess(normalizer, batch.observation)  # [T+1, B, D]
+    global_state = (preprocess(gs_normalizer, batch.global_state)
+                    if uses_global_state else None)
+    # One replay of T + 1 steps gives the values and the bootstrap value.
+    _, _, values = networks.unroll(params, batch.initial_carry, observation,
+                                   batch.reset, global_state)  # [T+1, B]
+    rewards = batch.reward * config.reward_scaling
+    discounts = config.discount * batch.discount
+    if batch.truncation is not None:
+      # As in agents.ppo.learning: bootstrap a cut episode with V(obs[t]).
+      truncated = batch.truncation.astype(rewards.dtype)
+      rewards = rewards + truncated * discounts * values[:-1]
+      discounts = discounts * (1.0 - truncated)
+    advantages, returns = losses.compute_gae(
+        rewards, values[:-1], discounts, values[-1], config.gae_lambda)
+    steps = ppo_types.TrainingBatch(
+        observation=observation[:-1], raw_action=batch.raw_action,
+        behaviour_log_prob=batch.log_prob, behaviour_value=values[:-1],
+        advantage=advantages, target_value=returns)
+    return types.SequenceTrainingBatch(
+        steps=steps, reset=batch.reset[:-1],
+        initial_carry=batch.initial_carry,
+        global_state=None if global_state is None else global_state[:-1])
+
+  def loss_fn(params, minibatch: types.SequenceTrainingBatch, key):
+    # Truncated BPTT: gradients flow through the T steps of the sequence but
+    # not into the stored initial carry, which is data.
+    _, dist_params, values = networks.unroll(
+        params, minibatch.initial_carry, minibatch.steps.observation,
+        minibatch.reset, minibatch.global_state)
+    return losses.ppo_loss(
+        dist_params, values, minibatch.steps, networks.distribution, key,
+        clip_epsilon=config.clip_epsilon,
+        clip_value_loss=config.clip_value_loss,
+        entropy_cost=config.entropy_cost, value_cost=config.value_cost,
+        normalize_advantages=config.normalize_advantages)
+
+  def sgd_step(carry, minibatch_and_key):
+    params, opt_state = carry
+    minibatch, key = minibatch_and_key
+    grads, metrics = jax.grad(loss_fn, has_aux=True)(params, minibatch, key)
+    metrics['grad_norm'] = optax.tree.norm(grads)  # Before clipping.
+    updates, opt_state = optimizer.update(grads, opt_state, params)
+    return (optax.apply_updates(params, updates), opt_state), metrics
+
+  def epoch(carry, key, batch: types.SequenceTrainingBatch):
+    permutation_key, loss_key = jax.random.split(key)
+    permutation = jax.random.permutation(
+        permutation_key, batch.initial_carry.shape[0])
+    m = config.num_minibatches
+
+    def split(x, axis):  # Shuffle B, then [.., B, ..] -> [M, .., B / M, ..].
+      x = jnp.take(x, permutation, axis=axis)
+      x = x.reshape(*x.shape[:axis], m, -1, *x.shape[axis + 1:])
+      return jnp.moveaxis(x, axis, 0)
+
+    minibatches = types.SequenceTrainingBatch(
+        steps=jax.tree.map(lambda x: split(x, 1), batch.steps),
+        reset=split(batch.reset, 1),
+        initial_carry=split(batch.initial_carry, 0),
+        global_state=jax.tree.map(lambda x: split(x, 1), batch.global_state))
+    keys = jax.random.split(loss_key, m)
+    return jax.lax.scan(sgd_step, carry, (minibatches, keys))
+
+  def update(state: TrainingState, batch: types.SequenceBatch):
+    _check_batch(networks, config, batch)
+    # Statistics first (as in agents.ppo.learning); the bootstrap row is the
+    # next batch's first row, so it is counted once, there.
+    normalizer = state.normalizer
+    gs_normalizer = state.global_state_normalizer
+    if config.normalize_observations:
+      normalizer = normalization.update(normalizer, batch.observation[:-1])
+      if uses_global_state:
+        gs_normalizer = normalization.update(gs_normalizer,
+                                             batch.global_state[:-1])
+    key, epochs_key = jax.random.split(state.key)
+    training_batch = make_training_batch(state.params, normalizer,
+                                         gs_normalizer, batch)
+    (params, opt_state), metrics = jax.lax.scan(
+        lambda carry, key: epoch(carry, key, training_batch),
+        (state.params, state.opt_state),
+        jax.random.split(epochs_key, config.num_epochs))
+    metrics = jax.tree.map(jnp.mean, metrics)
+    return TrainingState(params, opt_state, normalizer, gs_normalizer,
+                         state.step + 1, key), metrics
+
+  return update
+
+
+class HierarchyLearner(core.Learner):
+  """Trains one species' hierarchy; publishes params and statistics."""
+
+  def __init__(self,
+               networks: hierarchy_networks.HierarchyNetworks,
+               config: hierarchy_config.HierarchyConfig,
+               batches: Optional[Iterator[types.SequenceBatch]] = None,
+               key: Optional[jax.Array] = None):
+    """Args:
+      networks: the networks to train.
+      config: hyper-parameters.
+      batches: where `step()` takes data from when it is given none.
+      key: PRNG key; defaults to `PRNGKey(config.seed)`.
+    """
+    optimizer = make_optimizer(config)
+    if key is None:
+      key = jax.random.PRNGKey(config.seed)
+    self._state = make_initial_state(networks, optimizer, key)
+    self._update = jax.jit(make_update_fn(networks, config, optimizer))
+    self._batches = batches
+    # The variant is part of the file's kind: an 'hrl' file never loads into
+    # a 'mappo' learner, even where the shapes would allow it.
+    self._checkpoint_kind = f'hierarchy/{networks.agent}'
+
+  @property
+  def state(self) -> TrainingState:
+    """The current training state (a pytree of arrays)."""
+    return self._state
+
+  def step(self,
+           batch: Optional[types.SequenceBatch] = None) -> dict[str, Any]:
+    """One PPO iteration on `batch`, or on the iterator's next one.
+
+    Returns the update's metrics (device scalars; `float()` them to log).
+    """
+    if batch is None:
+      if self._batches is None:
+        raise ValueError('HierarchyLearner.step() needs a batch: pass one or '
+                         'give the learner a `batches` iterator.')
+      batch = next(self._batches)
+    self._state, metrics = self._update(self._state, batch)
+    return metrics
+
+  def get_variables(self, names: Sequence[str]) -> list[Any]:
+    """Variables by name: 'params', 'normalizer', 'global_state_normalizer'
+    or 'step'."""
+    state = self._state
+    variables = {'params': state.params, 'normalizer': state.normalizer,
+                 'global_state_normalizer': state.global_state_normalizer,
+                 'step': state.step}
+    unknown = [name for name in names if name not in variables]
+    if unknown:
+      raise ValueError(f'Unknown variable names {unknown}; expected some of '
+                       f'{sorted(variables)}.')
+    return [variables[name] for name in names]
+
+  def save(self, path: str) -> None:
+    """Writes the full training state to `path`, atomically."""
+    checkpointing.save_state(path, self._state, self._checkpoint_kind,
+                             _CHECKPOINT_FORMAT)
+
+  def restore(self, path: str) -> None:
+    """Loads a file written by `save` with the same networks and config."""
+    self._state = checkpointing.restore_state(
+        path, self._state, self._checkpoint_kind, _CHECKPOINT_FORMAT)

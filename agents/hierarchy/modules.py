@@ -1,0 +1,129 @@
+"""Flax modules of the hierarchy: upper layer, middle layer and heads.
+
+Everything is time-major: inputs [T, B, ...] and a carry [B, H]. An actor
+steps with T = 1; the learner replays whole sequences with T > 1. Because
+both run this one module, acting and learning see the same function.
+"""
+import functools
+from typing import Optional, Sequence
+
+import flax.linen as nn
+import jax
+import jax.numpy as jnp
+
+from agents.networks import mlp
+
+# A small last layer starts the policy close to its prior, whatever the input
+# (as `agents.networks.policy_value` does for the lower layer).
+_POLICY_HEAD_SCALE = 0.01
+
+
+class ResettingGRUCell(nn.Module):
+  """One GRU step that first resets the carry of rows starting an episode.
+
+  Scanned over time by `MiddleLayer`. The initial carry is zeros (PureJaxRL);
+  a reset replaces the carried state by it, so a new episode never sees the
+  previous one's memory.
+  """
+  hidden_size: int
+
+  @nn.compact
+  def __call__(self, carry: jax.Array, inputs: tuple[jax.Array, jax.Array]):
+    """(carry [B, H], (features [B, F], reset [B])) -> (carry, out [B, H])."""
+    features, reset = inputs
+    carry = jnp.where(reset[:, None], jnp.zeros_like(carry), carry)
+    return nn.GRUCell(features=self.hidden_size, name='gru')(carry, features)
+
+
+class MiddleLayer(nn.Module):
+  """The ML: a GRU scanned over the T commands of a sequence.
+
+  `recurrent=False` ('no_memory') replaces the GRU by one Dense layer of the
+  same width and passes the carry through untouched, so the interface (and
+  the learner's code path) stays the same.
+  """
+  hidden_size: int
+  recurrent: bool = True
+  activation: str = 'swish'
+
+  @nn.compact
+  def __call__(self, carry, features, reset):
+    """(carry [B, H], features [T, B, F], reset [T, B]) -> (carry, [T, B, H]).
+
+    The carry returned is the one after the last step.
+    """
+    if not self.recurrent:
+      out = mlp.MLP((self.hidden_size,), self.activation, activate_final=True,
+                    name='mlp')(features)
+      return carry, out
+    scan = nn.scan(ResettingGRUCell, variable_broadcast='params',
+                   split_rngs={'params': False}, in_axes=0, out_axes=0)
+    return scan(self.hidden_size, name='scan')(carry, (features, reset))
+
+
+class HierarchyPolicyValue(nn.Module):
+  """Policy (command) and value of one species, all variants in one module.
+
+  'hrl' / 'no_memory' / 'mappo': observation (exteroception) -> UL MLP ->
+  ML -> command head and value head ('mappo': value from the global state).
+  'flat': observation (proprio + extero) -> policy MLP and a separate value
+  MLP (Brax's layout for the lower layer); the carry passes through.
+  """
+  agent: str
+  action_size: int
+  upper_layer_sizes: Sequence[int]
+  middle_layer_size: int
+  head_sizes: Sequence[int]
+  critic_sizes: Sequence[int]
+  flat_sizes: Sequence[int]
+  activation: str = 'swish'
+  state_dependent_std: bool = False
+
+  @nn.compact
+  def __call__(self, carry, observation, reset,
+               global_state: Optional[jax.Array] = None):
+    """Unrolls T commands.
+
+    Args:
+      carry: [B, H] ML state before step 0 (before reset[0] applies).
+      observation: [T, B, D] normalised observations.
+      reset: [T, B] bool, true where observation[t] starts an episode.
+      global_state: [T, B, S] normalised global state ('mappo' only).
+
+    Returns:
+      (carry [B, H] after step T - 1, dist_params [T, B, 2A], value [T, B]).
+    """
+    head_outputs = (2 * self.action_size if self.state_dependent_std
+                    else self.action_size)
+    mlp_ = functools.partial(mlp.MLP, activation=self.activation)
+    if self.agent == 'flat':
+      policy_out = mlp_((*self.flat_sizes, head_outputs),
+                        final_kernel_scale=_POLICY_HEAD_SCALE,
+                        name='policy')(observation)
+      value = mlp_((*self.flat_sizes, 1), name='value')(observation)
+    else:
+      features = mlp_(self.upper_layer_sizes, activate_final=True,
+                      name='upper_layer')(observation)
+      carry, features = MiddleLayer(
+          self.middle_layer_size, recurrent=self.agent != 'no_memory',
+          activation=self.activation, name='middle_layer')(
+              carry, features, reset)
+      policy_out = mlp_((*self.head_sizes, head_outputs),
+                        final_kernel_scale=_POLICY_HEAD_SCALE,
+                        name='command_head')(features)
+      if self.agent == 'mappo':
+        if global_state is None:
+          raise ValueError("agent='mappo' needs a global_state input.")
+        value = mlp_((*self.critic_sizes, 1),
+                     name='centralised_critic')(global_state)
+      else:
+        value = mlp_((*self.head_sizes, 1), name='value_head')(features)
+    if self.state_dependent_std:
+      dist_params = policy_out
+    else:
+      # Pre-softplus scale, learned but shared by all states (see config).
+      raw_scale = self.param('raw_scale', nn.initializers.zeros,
+                             (self.action_size,))
+      dist_params = jnp.concatenate(
+          [policy_out, jnp.broadcast_to(raw_scale, policy_out.shape)], -1)
+    return carry, dist_params, jnp.squeeze(value, -1)

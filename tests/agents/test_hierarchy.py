@@ -1,0 +1,236 @@
+"""The hierarchical agent: variants learn, GRU resets, actor == learner."""
+import collections
+import functools
+import os
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from agents import normalization
+from agents.hierarchy import builder as hierarchy_builder
+from agents.hierarchy import config as hierarchy_config
+from agents.hierarchy import types
+
+TimeStep = collections.namedtuple(
+    'TimeStep', ['step_type', 'reward', 'discount', 'observation'])
+T, B, OBS_DIM, GLOBAL_DIM, H = 4, 4, 5, 3, 8
+SMALL = dict(upper_layer_sizes=(16,), middle_layer_size=H, head_sizes=(8,),
+             critic_sizes=(8,), flat_sizes=(16,), num_minibatches=2)
+
+
+def _action_dim(agent):
+  return 8 if agent == 'flat' else 2  # Joint actions or the 2-D command.
+
+
+@functools.lru_cache(maxsize=None)
+def _setup(agent):
+  """Builder, networks and learner per variant, shared so each compiles once."""
+  builder = hierarchy_builder.HierarchyBuilder(
+      hierarchy_config.HierarchyConfig(agent=agent, **SMALL))
+  networks = builder.make_networks(OBS_DIM, _action_dim(agent), GLOBAL_DIM)
+  return builder, networks, builder.make_learner(networks)
+
+
+def _random_batch(agent, seed=0):
+  rng = np.random.default_rng(seed)
+  f32 = lambda *shape: rng.normal(size=shape).astype(np.float32)
+  discount = (rng.uniform(size=(T, B)) > 0.2).astype(np.float32)
+  return types.SequenceBatch(
+      observation=f32(T + 1, B, OBS_DIM) * 3 + 1,
+      raw_action=f32(T, B, _action_dim(agent)), log_prob=f32(T, B) - 2,
+      reward=f32(T, B), discount=discount,
+      reset=rng.uniform(size=(T + 1, B)) < 0.3,
+      initial_carry=f32(B, H),
+      global_state=f32(T + 1, B, GLOBAL_DIM) if agent == 'mappo' else None,
+      truncation=((rng.uniform(size=(T, B)) > 0.9) * discount).astype(
+          np.float32))
+
+
+@pytest.mark.parametrize('agent', hierarchy_config.AGENTS)
+def test_updates_move_every_parameter_and_stay_finite(agent):
+  _, _, learner = _setup(agent)
+  before, step = learner.get_variables(['params', 'step'])
+  for seed in range(2):
+    metrics = learner.step(_random_batch(agent, seed))
+    for name, value in metrics.items():
+      assert np.isfinite(value), (agent, name)
+  after, normalizer, gs_normalizer, step_after = learner.get_variables(
+      ['params', 'normalizer', 'global_state_normalizer', 'step'])
+  unchanged = [jax.tree_util.keystr(path) for path, a, b in zip(
+      *zip(*jax.tree_util.tree_leaves_with_path(before)),
+      jax.tree.leaves(after)) if np.array_equal(a, b)]
+  assert not unchanged, unchanged
+  assert int(step_after) == int(step) + 2
+  assert float(normalizer.count) >= 2 * T * B
+  assert float(gs_normalizer.count) == (
+      float(normalizer.count) if agent == 'mappo' else 0.0)
+
+
+@pytest.mark.parametrize('agent', ['hrl', 'mappo'])
+def test_gru_carry_is_reset_where_an_episode_starts(agent):
+  _, networks, learner = _setup(agent)
+  params, = learner.get_variables(['params'])
+  rng = np.random.default_rng(1)
+  obs = jnp.asarray(rng.normal(size=(6, B, OBS_DIM)), jnp.float32)
+  gs = jnp.asarray(rng.normal(size=(6, B, GLOBAL_DIM)), jnp.float32)
+  carry = jnp.asarray(rng.normal(size=(B, H)), jnp.float32)
+  reset = np.zeros((6, B), bool)
+  reset[3, :2] = True  # Rows 0 and 1 start a new episode at t = 3.
+  _, dist, value = networks.unroll(params, carry, obs, reset, gs)
+  # A fresh sequence starting at t = 3 from the initial carry.
+  _, fresh_dist, fresh_value = networks.unroll(
+      params, networks.initial_carry(B), obs[3:], np.zeros((3, B), bool),
+      gs[3:])
+  np.testing.assert_allclose(dist[3:, :2], fresh_dist[:, :2], atol=1e-6)
+  np.testing.assert_allclose(value[3:, :2], fresh_value[:, :2], atol=1e-6)
+  # Rows without a reset remember the earlier steps: the memory is real.
+  assert not np.allclose(dist[3:, 2:], fresh_dist[:, 2:], atol=1e-4)
+
+
+def test_actor_steps_compute_the_function_the_learner_replays():
+  builder, networks, learner = _setup('hrl')
+  learner.step(_random_batch('hrl', 2))  # Non-trivial statistics.
+  actor = builder.make_actor(networks, learner, action_bounds=(-3.0, 3.0))
+  rng = np.random.default_rng(3)
+  actor.observe_first()
+  carries, values = [], []
+  for t in range(T):
+    obs = rng.normal(size=(B, OBS_DIM)).astype(np.float32)
+    reset = np.zeros(B, bool) if t else np.ones(B, bool)
+    if t == 2:
+      reset[1] = True  # Agent 1's episode ended after command 1.
+    actions, extras = actor.select_action(obs, reset)
+    assert actions.shape == (B, 2) and np.all(np.abs(actions) <= 3.0)
+    carries.append(extras['carry_before'])
+    values.append(extras['value'])
+    step_type = np.where(np.arange(B) == 1, 2 if t == 1 else 1, 1)
+    actor.observe(actions, TimeStep(step_type, np.ones(B, np.float32),
+                                    np.ones(B, np.float32), obs + 1))
+  final_carry = actor.carry
+  batch = actor.take_rollout()
+  assert batch.observation.shape == (T + 1, B, OBS_DIM)
+  np.testing.assert_array_equal(batch.reset[2], [0, 1, 0, 0])
+  np.testing.assert_array_equal(batch.reset[-1], [0, 0, 0, 0])
+  np.testing.assert_array_equal(batch.initial_carry, carries[0])
+  np.testing.assert_array_equal(batch.truncation[1], [0, 1, 0, 0])
+
+  # The learner's replay of the stored sequence: same log-probs and values.
+  params, normalizer = learner.get_variables(['params', 'normalizer'])
+  carry, dist, value = networks.unroll(
+      params, batch.initial_carry,
+      normalization.normalize(normalizer, batch.observation[:-1]),
+      batch.reset[:-1])
+  log_prob = networks.distribution.log_prob(dist, batch.raw_action)
+  np.testing.assert_allclose(log_prob, batch.log_prob, rtol=1e-5, atol=1e-5)
+  np.testing.assert_allclose(value, np.stack(values), rtol=1e-5, atol=1e-5)
+  np.testing.assert_allclose(carry, final_carry, atol=1e-6)
+  # The learner accepts the actor's batch as it is.
+  assert np.isfinite(float(learner.step(batch)['total_loss']))
+
+
+def test_actor_keeps_one_parameter_version_per_segment():
+  builder, networks, learner = _setup('no_memory')
+  actor = builder.make_actor(networks, learner)
+  obs = np.zeros((B, OBS_DIM), np.float32)
+  timestep = TimeStep(np.ones(B, int), np.zeros(B, np.float32),
+                      np.ones(B, np.float32), obs)
+  actor.observe_first()
+  actor.select_action(obs, np.ones(B, bool))
+  actor.observe(None, timestep)
+  # pylint: disable=protected-access
+  old_params = actor._variables[0]
+  learner.step(_random_batch('no_memory'))
+  actor.update()  # Mid-segment: deferred.
+  assert actor._variables[0] is old_params
+  actor.take_rollout()
+  assert actor._variables[0] is not old_params
+  # pylint: enable=protected-access
+  with pytest.raises(RuntimeError, match='observe after each'):
+    actor.select_action(obs, np.zeros(B, bool))
+    actor.select_action(obs, np.zeros(B, bool))
+
+
+def test_mappo_value_reads_the_global_state_only():
+  _, networks, learner = _setup('mappo')
+  params, = learner.get_variables(['params'])
+  rng = np.random.default_rng(4)
+  obs = jnp.asarray(rng.normal(size=(2, B, OBS_DIM)), jnp.float32)
+  gs = jnp.asarray(rng.normal(size=(2, B, GLOBAL_DIM)), jnp.float32)
+  carry, reset = networks.initial_carry(B), np.zeros((2, B), bool)
+  _, dist, value = networks.unroll(params, carry, obs, reset, gs)
+  _, other_dist, same_value = networks.unroll(params, carry, -obs, reset, gs)
+  _, same_dist, other_value = networks.unroll(params, carry, obs, reset, -gs)
+  np.testing.assert_array_equal(value, same_value)
+  np.testing.assert_array_equal(dist, same_dist)
+  assert not np.allclose(value, other_value)
+  assert not np.allclose(dist, other_dist)
+  with pytest.raises(ValueError, match='needs global_state_dim'):
+    hierarchy_builder.HierarchyBuilder(hierarchy_config.HierarchyConfig(
+        agent='mappo')).make_networks(OBS_DIM, 2)
+
+
+@pytest.mark.parametrize('agent, other', [('mappo', 'hrl'), ('hrl', 'flat')])
+def test_save_restore_round_trips_and_the_step_counter_continues(
+    tmp_path, agent, other):
+  _, _, learner = _setup(agent)
+  learner.step(_random_batch(agent, 5))
+  saved = jax.device_get(learner.state)
+  path = str(tmp_path / 'ckpt' / 'species0.msgpack')
+  learner.save(path)
+  assert os.listdir(tmp_path / 'ckpt') == ['species0.msgpack']
+  learner.step(_random_batch(agent, 6))
+  after_saved = jax.device_get(learner.state)
+
+  learner.restore(path)
+  for a, b in zip(jax.tree.leaves(saved), jax.tree.leaves(learner.state)):
+    np.testing.assert_array_equal(a, b)
+  learner.step(_random_batch(agent, 6))  # Same data: same result.
+  for a, b in zip(jax.tree.leaves(after_saved),
+                  jax.tree.leaves(learner.state)):
+    np.testing.assert_array_equal(a, b)
+  assert int(learner.state.step) == int(saved.step) + 1
+  with pytest.raises(ValueError, match=f'not a hierarchy/{other} checkpoint'):
+    _setup(other)[2].restore(path)
+
+
+def test_bad_batches_and_configs_are_rejected_with_clear_errors():
+  _, _, learner = _setup('hrl')
+  batch = _random_batch('hrl')
+  with pytest.raises(ValueError, match='initial_carry has shape'):
+    learner.step(batch._replace(initial_carry=batch.initial_carry[:, :2]))
+  with pytest.raises(ValueError, match='must be one of'):
+    hierarchy_config.HierarchyConfig(agent='feudal')
+  with pytest.raises(ValueError, match='needs a batch'):
+    learner.step()
+
+
+def test_hrl_remembers_a_cue_it_no_longer_sees():
+  """Memory sanity check: a cue shown at the first of 3 commands is rewarded
+  at the last, when the observation is 0. A memoryless policy earns 0 in
+  expectation; the GRU must carry the cue (reward 1 = command * cue)."""
+  builder = hierarchy_builder.HierarchyBuilder(hierarchy_config.HierarchyConfig(
+      upper_layer_sizes=(16,), middle_layer_size=16, head_sizes=(),
+      learning_rate=1e-2, num_minibatches=1, entropy_cost=0.0))
+  networks = builder.make_networks(obs_dim=1, action_dim=1)
+  learner = builder.make_learner(networks)
+  actor = builder.make_actor(networks, learner)
+  rng = np.random.default_rng(0)
+  batch_size, returns = 64, []
+  actor.observe_first()
+  for _ in range(20):
+    cue = rng.choice([-1.0, 1.0], size=(batch_size, 1)).astype(np.float32)
+    observations = [cue, 0 * cue, 0 * cue, cue]  # Then the next episode.
+    for t in range(3):
+      actions, _ = actor.select_action(observations[t],
+                                       np.full(batch_size, t == 0))
+      last = t == 2
+      reward = (actions * cue)[:, 0] if last else np.zeros(batch_size)
+      actor.observe(actions, TimeStep(
+          np.full(batch_size, 2 if last else 1), reward,
+          np.full(batch_size, 0.0 if last else 1.0), observations[t + 1]))
+    returns.append(reward.mean())
+    learner.step(actor.take_rollout())
+    actor.update()
+  assert np.mean(returns[-5:]) > 0.9, returns
