@@ -16,7 +16,7 @@ setuptools.setup(
     packages=setuptools.find_packages(include=["coop_suite*", "agents*", "runners*"]),
     package_data={
         "coop_suite": ["entities/assets/*.xml"],
-        "agents": ["lowlevel/weights/*"],
+        "agents": ["lowlevel/weights/*/*"],
     },
     python_requires=">=3.10",
     install_requires=[
@@ -43,6 +43,9 @@ setuptools.setup(
     entry_points={
         "console_scripts": [
             "coop-video=runners.video:main",
+            "coop-pretrain-lowlevel=runners.pretrain_locomotion:main",
+            "coop-train=runners.train:main",
+            "coop-eval=runners.evaluate:main",
         ],
     },
 )

@@ -162,8 +162,12 @@ class CoopEnvironment(composer.Environment):
     else:
       reward = self._task.get_reward(self._physics_proxy)
       discount = self._task.get_discount(self._physics_proxy)
+      # Half a physics step of slack: summing 0.01 s steps in floating point
+      # reaches 9.99999 after 10 s, which would add one step to the episode.
+      time_up = self._physics.time() >= (
+          self._time_limit - 0.5 * self._physics.timestep())
       terminating = (self._task.should_terminate_episode(self._physics_proxy)
-                     or self._physics.time() >= self._time_limit)
+                     or time_up)
     observation = self._observation_updater.get_observation()
     if terminating:
       self._reset_next_step = True

@@ -163,13 +163,14 @@ def test_walk_velocity_reward_terms():
       sum(metrics[k] for k in metrics if k.startswith("reward/")), rel=1e-5)
 
 
-def test_time_limit_is_a_truncation():
-  env = coop_suite.load("corridor", 2, seed=0, time_limit=0.5)
+@pytest.mark.parametrize("time_limit,steps", [(0.5, 10), (10.0, 200)])
+def test_time_limit_is_a_truncation(time_limit, steps):
+  env = coop_suite.load("walk_velocity", seed=0, time_limit=time_limit)
   timestep = env.reset()
-  steps = 0
+  count = 0
   while not timestep.last():
-    timestep = env.step(_zeros(env))
-    steps += 1
-  assert steps == 10
+    timestep = env.step(ZERO)
+    count += 1
+  assert count == steps
   assert float(timestep.discount) == 1.0
   assert coop_suite.is_truncation(timestep)

@@ -52,8 +52,11 @@ class HierarchyConfig:
   """Weight of the value loss 0.5 * (return - value)^2."""
   normalize_advantages: bool = True
   """Standardise advantages within each minibatch."""
-  reward_scaling: float = 1.0
-  """Rewards are multiplied by this before GAE."""
+  reward_scaling: float = 0.01
+  """Rewards are multiplied by this before GAE. The paper's rewards summed
+  over a 0.5 s command reach ~40 per command and ~3000 per episode; unscaled,
+  the value loss (~3e4) dominates the clipped global gradient norm and the
+  policy barely moves (measured: approx_kl ~1e-4 per update)."""
 
   # Data.
   sequence_length: int = 16

@@ -212,7 +212,8 @@ def test_hrl_remembers_a_cue_it_no_longer_sees():
   expectation; the GRU must carry the cue (reward 1 = command * cue)."""
   builder = hierarchy_builder.HierarchyBuilder(hierarchy_config.HierarchyConfig(
       upper_layer_sizes=(16,), middle_layer_size=16, head_sizes=(),
-      learning_rate=1e-2, num_minibatches=1, entropy_cost=0.0))
+      learning_rate=1e-2, num_minibatches=1, entropy_cost=0.0,
+      reward_scaling=1.0))  # Rewards here are already of order 1.
   networks = builder.make_networks(obs_dim=1, action_dim=1)
   learner = builder.make_learner(networks)
   actor = builder.make_actor(networks, learner)

@@ -1,0 +1,45 @@
+"""The lower layer: a pretrained, frozen walker controller and its wrapper.
+
+    from agents import lowlevel
+    controller = lowlevel.load('position')          # shipped weights
+    action = controller(observation_dict)            # [8] in [-1, 1]
+    env = lowlevel.CommandWrapper(coop_suite.load('transport', 4),
+                                  controller, command_period=0.5)
+
+controller.py  Controller (deterministic, jit-compiled), save / load_from.
+wrapper.py     CommandWrapper: per-agent commands instead of joint actions.
+weights/       trained controllers, one folder per paradigm.
+"""
+import os
+
+from agents.lowlevel.controller import Controller
+from agents.lowlevel.controller import load_from
+from agents.lowlevel.controller import PARADIGMS
+from agents.lowlevel.controller import save
+
+WEIGHTS_DIR = os.path.join(os.path.dirname(__file__), 'weights')
+
+
+def load(paradigm: str = 'position', directory: str = None) -> Controller:
+  """The controller shipped for `paradigm` ('position' or 'velocity').
+
+  Args:
+    paradigm: command paradigm.
+    directory: read from here instead of `weights/<paradigm>/`.
+  """
+  if paradigm not in PARADIGMS:
+    raise ValueError(f'Unknown paradigm {paradigm!r}; expected one of '
+                     f'{sorted(PARADIGMS)}.')
+  controller = load_from(directory or os.path.join(WEIGHTS_DIR, paradigm))
+  if controller.paradigm != paradigm:
+    raise ValueError(f'{directory} holds a {controller.paradigm!r} '
+                     f'controller, not {paradigm!r}.')
+  return controller
+
+
+def __getattr__(name):
+  # The wrapper imports coop_suite; keep `load` usable without it.
+  if name == 'CommandWrapper':
+    from agents.lowlevel.wrapper import CommandWrapper  # pylint: disable=g-import-not-at-top
+    return CommandWrapper
+  raise AttributeError(name)

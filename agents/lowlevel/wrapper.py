@@ -1,0 +1,217 @@
+"""CommandWrapper: any coop_suite environment driven by per-agent commands.
+
+The wrapped environment's action per agent is a 2-D command instead of 8
+joint actions; the frozen lower layer turns it into joint actions for the
+`command_period / control_timestep` low-level steps of one command period:
+
+* position paradigm: the command is a target offset (m) in the agent's
+  heading frame *at the time the command is issued*. It is turned into a
+  world-frame target once per period; every low-level step the controller
+  sees `command/target` = the offset from where the agent is now to that
+  world target, in its current heading frame (exactly what `walk_to_target`
+  trained it on).
+* velocity paradigm: the command is a planar velocity (m/s) in the agent's
+  heading frame at issue time. It is turned into a world-frame velocity once
+  per period and held fixed in the world, so `command/velocity` turns with
+  the agent in its heading frame, as in `walk_velocity` (where commands are
+  fixed in the world between redraws). Holding the world direction makes a
+  command mean "go that way", not "keep turning".
+
+Commands are clipped to the action spec: each axis to +-`command_bound`
+(default 3 m for position, 1 m/s for velocity), and velocity commands also to
+a norm of at most `command_bound` (the controller never saw faster ones).
+
+One wrapper step = one command period: rewards are summed per agent over the
+low-level steps, discounts multiplied, and the period ends early when the
+episode does. Observations are the wrapped environment's own (proprio/*,
+extero/* and any command/* of the task), taken at the end of the period.
+"""
+from typing import Any, Optional
+
+import dm_env
+from dm_env import specs
+import numpy as np
+
+from coop_suite.tasks import observables as frames_lib
+
+DEFAULT_COMMAND_BOUND = {'position': 3.0, 'velocity': 1.0}
+"""Per-axis bound of a command: metres (position) or m/s (velocity)."""
+
+
+class CommandWrapper:
+  """A multi-agent environment whose per-agent action is a command."""
+
+  def __init__(self, env, controller, command_period: float = 0.5,
+               command_bound: Optional[float] = None):
+    """Args:
+      env: a `coop_suite` environment (any task, any number of agents).
+      controller: an `agents.lowlevel.Controller`.
+      command_period: seconds between commands; a multiple of the env's
+        control timestep.
+      command_bound: per-axis bound of the commands; default by paradigm
+        (see `DEFAULT_COMMAND_BOUND`).
+    """
+    self._env = env
+    self._controller = controller
+    self._paradigm = controller.paradigm
+    dt = env.control_timestep()
+    steps = int(round(command_period / dt))
+    if steps < 1 or abs(steps * dt - command_period) > 1e-6:
+      raise ValueError(f'command_period={command_period} s must be a positive '
+                       f'multiple of the control timestep {dt} s.')
+    self._low_level_steps = steps
+    bound = float(command_bound if command_bound is not None
+                  else DEFAULT_COMMAND_BOUND[self._paradigm])
+    if bound <= 0:
+      raise ValueError(f'command_bound must be > 0, got {bound}.')
+    self._bound = bound
+    self._action_spec = [
+        specs.BoundedArray((2,), np.float64, -bound, bound, name=f'command_{i}')
+        for i in range(env.n_agents)]
+    keys = controller.observation_keys
+    self._proprio_keys = [k for k in keys if k != controller.command_key]
+    self._world_commands = np.zeros((env.n_agents, 2))
+    self._observation = None
+    self._reset_next_step = True
+
+  # --- Properties and passthroughs ------------------------------------------
+
+  @property
+  def env(self):
+    """The wrapped (low-level) environment."""
+    return self._env
+
+  @property
+  def controller(self):
+    return self._controller
+
+  @property
+  def n_agents(self) -> int:
+    return self._env.n_agents
+
+  @property
+  def task(self):
+    return self._env.task
+
+  @property
+  def physics(self):
+    return self._env.physics
+
+  @property
+  def low_level_steps(self) -> int:
+    """Low-level control steps per command."""
+    return self._low_level_steps
+
+  @property
+  def world_commands(self) -> np.ndarray:
+    """The current commands in the world frame [n_agents, 2]: targets (m)
+    for position, velocities (m/s) for velocity."""
+    return self._world_commands.copy()
+
+  def control_timestep(self) -> float:
+    """Seconds per wrapper step (the command period)."""
+    return self._low_level_steps * self._env.control_timestep()
+
+  def action_spec(self):
+    """Per-agent command specs: list of BoundedArray [2]."""
+    return list(self._action_spec)
+
+  def observation_spec(self):
+    return self._env.observation_spec()
+
+  def reward_spec(self):
+    return self._env.reward_spec()
+
+  def discount_spec(self):
+    return self._env.discount_spec()
+
+  def episode_metrics(self):
+    return self._env.episode_metrics()
+
+  def close(self):
+    self._env.close()
+
+  # --- dm_env interface --------------------------------------------------------
+
+  def reset(self) -> dm_env.TimeStep:
+    timestep = self._env.reset()
+    self._observation = timestep.observation
+    self._world_commands = self._frames().position[:, :2].copy() if (
+        self._paradigm == 'position') else np.zeros((self.n_agents, 2))
+    self._reset_next_step = False
+    return timestep
+
+  def step(self, commands) -> dm_env.TimeStep:
+    """Runs one command period; `commands` [n_agents, 2] (see module doc)."""
+    if self._reset_next_step:
+      return self.reset()
+    commands = self._validate(commands)
+    frames = self._frames()
+    world = _rotate_from_heading(commands, frames.cos, frames.sin)
+    if self._paradigm == 'position':
+      self._world_commands = frames.position[:, :2] + world
+    else:
+      self._world_commands = world
+    total = np.zeros(self.n_agents)
+    discount = 1.0
+    timestep = None
+    for _ in range(self._low_level_steps):
+      actions = self._controller.batch(self._controller_inputs())
+      timestep = self._env.step(actions)
+      self._observation = timestep.observation
+      total += np.asarray(timestep.reward, np.float64)
+      discount *= float(timestep.discount)
+      if timestep.last():
+        break
+    last = timestep.last()
+    self._reset_next_step = last
+    return dm_env.TimeStep(
+        step_type=dm_env.StepType.LAST if last else dm_env.StepType.MID,
+        reward=[np.float32(r) for r in total],
+        discount=np.float32(discount),
+        observation=timestep.observation)
+
+  # --- Internals -------------------------------------------------------------
+
+  def _frames(self):
+    return frames_lib.AgentFrames.from_walkers(self._env.task.walkers,
+                                               self._env.physics)
+
+  def _controller_inputs(self):
+    """Stacked controller observations: proprio from the env + command."""
+    frames = self._frames()
+    if self._paradigm == 'position':
+      command = frames.to_heading_frame(self._world_commands)
+    else:
+      command = frames_lib.rotate_to_heading(self._world_commands, frames.cos,
+                                             frames.sin)
+    inputs = {k: np.stack([o[k] for o in self._observation])
+              for k in self._proprio_keys}
+    inputs[self._controller.command_key] = command
+    return inputs
+
+  def _validate(self, commands) -> np.ndarray:
+    n = self.n_agents
+    try:
+      commands = np.asarray(commands, np.float64)
+    except (TypeError, ValueError) as e:
+      raise TypeError(f'commands must be numeric, shape ({n}, 2): {e}') from None
+    if commands.shape != (n, 2):
+      raise ValueError(f'Expected commands of shape ({n}, 2) (one 2-D command '
+                       f'per agent), got {commands.shape}.')
+    if not np.isfinite(commands).all():
+      raise ValueError(f'Commands contain NaN or inf: {commands}.')
+    commands = np.clip(commands, -self._bound, self._bound)
+    if self._paradigm == 'velocity':
+      norm = np.linalg.norm(commands, axis=1, keepdims=True)
+      commands = commands * np.minimum(1.0, self._bound / np.maximum(norm,
+                                                                     1e-12))
+    return commands
+
+
+def _rotate_from_heading(vectors, cos, sin):
+  """Heading-frame vectors [n, 2] -> world frame (rotate by +yaw)."""
+  out = np.empty_like(vectors)
+  out[:, 0] = cos * vectors[:, 0] - sin * vectors[:, 1]
+  out[:, 1] = sin * vectors[:, 0] + cos * vectors[:, 1]
+  return out

@@ -1,0 +1,178 @@
+"""Where the rollout workers run: in this process, or as Ray actors.
+
+Both pools answer `collect(variables, version) -> [Rollout]` (in worker
+order) for one synchronous PPO iteration:
+
+* `LocalPool` (`--actors 0`): one `RolloutWorker` in this process, no Ray.
+* `RayPool`: one Ray actor process per worker. The variables are
+  `ray.put` once per call and passed by reference; results are taken with
+  `ray.wait` in completion order. A worker whose process dies (a crash,
+  `kill -9`, a lost node) is restarted by Ray (`max_restarts`); its pending
+  rollout is submitted again with the same variables reference, so the
+  restarted worker is re-synced and the iteration still uses one version.
+
+Ray notes (see docs/training.md): actors run with `JAX_PLATFORMS=cpu` and
+single-threaded XLA/OpenMP, set through the actor's runtime environment
+before JAX starts; they never fork. `init_ray` starts a local instance (or
+joins `--ray-address`) quietly, without the dashboard.
+"""
+import logging
+import time
+from typing import Any, Callable, Optional
+
+import numpy as np
+
+from runners import rollout
+
+ACTOR_ENV_VARS = {
+    'JAX_PLATFORMS': 'cpu',
+    'XLA_FLAGS': ('--xla_cpu_multi_thread_eigen=false '
+                  'intra_op_parallelism_threads=1'),
+    'OMP_NUM_THREADS': '1',
+    'MKL_NUM_THREADS': '1',
+}
+"""Environment of actor processes: CPU JAX, one thread each (an actor is one
+CPU's worth of work; more threads only contend with the other actors)."""
+
+
+def worker_seeds(seed: int, start_iteration: int, num_workers: int):
+  """One seed per worker; a resumed run (start_iteration > 0) gets new ones
+  so it does not replay the first iterations' episodes."""
+  sequence = np.random.SeedSequence([seed, start_iteration])
+  return [int(s >> 1) for s in sequence.generate_state(num_workers)]
+
+
+class LocalPool:
+  """One worker in this process."""
+
+  restarts = 0
+
+  def __init__(self, spec, config, num_envs: int, seed: int):
+    self._worker = rollout.RolloutWorker(spec, config, 0, seed, num_envs)
+
+  def collect(self, variables, version, on_result=None):
+    result = self._worker.collect(variables, version)
+    if on_result is not None:
+      on_result(result)
+    return [result]
+
+  def close(self):
+    self._worker.close()
+
+
+def init_ray(address: str = '', num_cpus: Optional[int] = None) -> bool:
+  """Starts (or joins) Ray quietly; returns whether this call started it.
+
+  Args:
+    address: an existing cluster ('auto', 'ray://host:port', ...); empty
+      starts a local instance with `num_cpus` CPUs.
+    num_cpus: CPUs of the local instance (None: all of this machine).
+  """
+  import ray  # pylint: disable=g-import-not-at-top
+  if ray.is_initialized():
+    return False
+  quiet = dict(logging_level=logging.WARNING, log_to_driver=False,
+               configure_logging=True)
+  if address:
+    ray.init(address=address, **quiet)
+    return True
+  # A local instance owned by this command: Ray's notice that it protects
+  # the instance with a token (its default) is noise here.
+  notice = logging.getLogger(
+      'ray._private.authentication.authentication_token_setup')
+  level = notice.level
+  notice.setLevel(logging.ERROR)
+  try:
+    ray.init(num_cpus=num_cpus, include_dashboard=False, **quiet)
+  finally:
+    notice.setLevel(level)
+  return True
+
+
+class RayPool:
+  """`num_workers` rollout workers as Ray actors, restarted when they die."""
+
+  def __init__(self, spec, config, num_envs: int, seeds, max_restarts: int = 3,
+               restart_timeout: float = 300.0):
+    """Args:
+      spec: `EnvSpec` of the copies (controller bytes included).
+      config: the `HierarchyConfig`.
+      num_envs: copies per worker.
+      seeds: one seed per worker (`worker_seeds`).
+      max_restarts: restarts Ray grants each worker (-1: unlimited).
+      restart_timeout: seconds to wait for a restarted worker to answer.
+    """
+    import ray  # pylint: disable=g-import-not-at-top
+    if not ray.is_initialized():
+      raise RuntimeError('RayPool needs Ray: call init_ray() first.')
+    self._ray = ray
+    remote = ray.remote(num_cpus=1, max_restarts=max_restarts,
+                        max_task_retries=0)(rollout.RolloutWorker)
+    remote = remote.options(runtime_env={'env_vars': ACTOR_ENV_VARS})
+    # The spec (with the controller's bytes) goes to the object store once
+    # and reaches the workers with their first rollout, never as a
+    # constructor argument: Ray cannot restart an actor whose large
+    # constructor arguments it dropped (ray-project/ray#53727).
+    self._spec_ref = ray.put(spec)
+    self._workers = [remote.remote(None, config, i, seed, num_envs)
+                     for i, seed in enumerate(seeds)]
+    self._max_restarts = max_restarts
+    self._restart_timeout = restart_timeout
+    self.restarts = 0
+    self._restarts_per_worker = [0] * len(self._workers)
+
+  def pids(self) -> list[int]:
+    """Process ids of the workers (e.g. to kill one in a test)."""
+    return self._ray.get([w.ping.remote() for w in self._workers])
+
+  def collect(self, variables, version,
+              on_result: Optional[Callable[[Any], None]] = None):
+    """One rollout per worker, all with `variables` (see module doc).
+
+    `on_result` sees each rollout as it arrives (completion order).
+    """
+    ray = self._ray
+    variables_ref = ray.put(variables)  # Once; every worker reads the ref.
+    submit = lambda i: self._workers[i].collect.remote(
+        variables_ref, version, self._spec_ref)
+    pending = {submit(i): i for i in range(len(self._workers))}
+    results = {}
+    while pending:
+      ready, _ = ray.wait(list(pending), num_returns=1)
+      for ref in ready:
+        index = pending.pop(ref)
+        try:
+          result = ray.get(ref)
+        except ray.exceptions.RayActorError as e:
+          self._wait_for_restart(index, e)
+          pending[submit(index)] = index
+          continue
+        results[index] = result
+        if on_result is not None:
+          on_result(result)
+    return [results[i] for i in range(len(self._workers))]
+
+  def _wait_for_restart(self, index: int, error: Exception) -> None:
+    ray = self._ray
+    self.restarts += 1
+    self._restarts_per_worker[index] += 1
+    if 0 <= self._max_restarts < self._restarts_per_worker[index]:
+      raise RuntimeError(
+          f'Actor {index} died more than --max-actor-restarts='
+          f'{self._max_restarts} times; last error: {error}') from error
+    deadline = time.monotonic() + self._restart_timeout
+    while True:
+      try:
+        ray.get(self._workers[index].ping.remote(), timeout=30)
+        return
+      except (ray.exceptions.RayActorError,
+              ray.exceptions.GetTimeoutError) as e:
+        if time.monotonic() > deadline:
+          raise RuntimeError(f'Actor {index} did not come back within '
+                             f'{self._restart_timeout:.0f} s: {e}') from e
+        time.sleep(0.5)
+
+  def close(self):
+    for worker in self._workers:
+      self._ray.kill(worker)
+    self._workers = []

@@ -1,0 +1,60 @@
+"""Frozen dataclass of arguments -> argparse CLI (CleanRL style, no tyro).
+
+Each field becomes `--field-name` with its default, and the string literal
+written under the field (its attribute docstring) becomes the help text.
+Booleans take `--flag` / `--no-flag`; tuples take several values.
+"""
+import argparse
+import ast
+import dataclasses
+import inspect
+import textwrap
+import typing
+
+
+def field_docs(cls) -> dict[str, str]:
+  """Attribute docstrings of a dataclass: {field name: docstring}."""
+  docs = {}
+  for klass in reversed(cls.__mro__):
+    try:
+      source = textwrap.dedent(inspect.getsource(klass))
+    except (OSError, TypeError):
+      continue
+    body = ast.parse(source).body
+    if not body or not isinstance(body[0], ast.ClassDef):
+      continue
+    statements = body[0].body
+    for node, after in zip(statements, statements[1:]):
+      if (isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name)
+          and isinstance(after, ast.Expr)
+          and isinstance(after.value, ast.Constant)
+          and isinstance(after.value.value, str)):
+        docs[node.target.id] = ' '.join(after.value.value.split())
+  return docs
+
+
+def parse(cls, argv=None, description=None):
+  """Parses `argv` into an instance of the dataclass `cls`."""
+  parser = argparse.ArgumentParser(
+      description=description,
+      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+  docs = field_docs(cls)
+  hints = typing.get_type_hints(cls)
+  for field in dataclasses.fields(cls):
+    flag = '--' + field.name.replace('_', '-')
+    kind = hints[field.name]
+    help_text = docs.get(field.name, ' ')
+    if kind is bool:
+      parser.add_argument(flag, action=argparse.BooleanOptionalAction,
+                          default=field.default, help=help_text)
+    elif typing.get_origin(kind) is tuple:
+      element = typing.get_args(kind)[0]
+      parser.add_argument(flag, type=element, nargs='+',
+                          default=field.default, help=help_text)
+    else:
+      parser.add_argument(flag, type=kind, default=field.default,
+                          help=help_text)
+  values = vars(parser.parse_args(argv))
+  values = {k: tuple(v) if isinstance(v, list) else v
+            for k, v in values.items()}
+  return cls(**values)

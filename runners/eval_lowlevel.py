@@ -1,0 +1,89 @@
+"""Evaluates a lower-layer controller on its locomotion task, deterministic.
+
+    python -m runners.eval_lowlevel --paradigm position
+    python -m runners.eval_lowlevel --paradigm velocity --controller runs/lowlevel_velocity/controller
+
+Position: `walk_to_target` with a fixed target (not redrawn when reached):
+success rate (reached within `reach_radius`), seconds to reach, final
+distance, fall rate. Velocity: `walk_velocity`: velocity cosine, relative
+speed error, speed while told to stand, fall rate. Means with standard errors
+over episodes; the episode seeds are `seed, seed + 1, ...`.
+"""
+import dataclasses
+import json
+
+import numpy as np
+
+from runners import cli
+
+TASKS = {'position': 'walk_to_target', 'velocity': 'walk_velocity'}
+
+
+@dataclasses.dataclass(frozen=True)
+class EvalArgs:
+  """What to evaluate."""
+
+  paradigm: str = 'position'
+  """'position' or 'velocity'."""
+  controller: str = ''
+  """Controller directory; default: the weights shipped in agents/lowlevel."""
+  episodes: int = 20
+  """Episodes to run."""
+  seed: int = 1000
+  """Seed of the first episode's environment."""
+  time_limit: float = 10.0
+  """Episode length (s)."""
+
+
+def evaluate(args: EvalArgs) -> dict:
+  """Returns {metric: (mean, standard error)} over `args.episodes`."""
+  import coop_suite  # pylint: disable=g-import-not-at-top
+  from agents import lowlevel  # pylint: disable=g-import-not-at-top
+  controller = lowlevel.load(args.paradigm, args.controller or None)
+  options = {'resample_on_reach': False} if args.paradigm == 'position' else {}
+  rows = []
+  for episode in range(args.episodes):
+    env = coop_suite.load(TASKS[args.paradigm], 1, seed=args.seed + episode,
+                          time_limit=args.time_limit, **options)
+    timestep = env.reset()
+    reached_at = None
+    steps = 0
+    while not timestep.last():
+      timestep = env.step(controller.batch(timestep.observation))
+      steps += 1
+      metrics = env.episode_metrics()
+      if (args.paradigm == 'position' and reached_at is None
+          and metrics['success']):
+        reached_at = steps * env.control_timestep()
+    metrics = env.episode_metrics()
+    row = {'return': metrics['return'], 'fall': float(metrics['failure'])}
+    if args.paradigm == 'position':
+      row.update(success=float(metrics['success']),
+                 final_distance=metrics['target_distance'],
+                 seconds_to_reach=reached_at if reached_at else np.nan)
+    else:
+      for name in ('velocity_cosine', 'speed_error', 'mean_speed_still'):
+        row[name] = metrics.get(name, np.nan)
+    rows.append(row)
+    env.close()
+  out = {}
+  for name in rows[0]:
+    values = np.array([r[name] for r in rows], np.float64)
+    values = values[np.isfinite(values)]
+    mean = float(values.mean()) if len(values) else float('nan')
+    se = (float(values.std(ddof=1) / np.sqrt(len(values)))
+          if len(values) > 1 else float('nan'))
+    out[name] = (mean, se)
+  return out
+
+
+def main(argv=None):
+  args = cli.parse(EvalArgs, argv, description=__doc__.splitlines()[0])
+  results = evaluate(args)
+  for name, (mean, se) in results.items():
+    print(f'{name:>18}: {mean:8.3f} +- {se:.3f}')
+  print(json.dumps({k: v[0] for k, v in results.items()}))
+
+
+if __name__ == '__main__':
+  main()

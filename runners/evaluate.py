@@ -1,0 +1,281 @@
+"""Evaluates trained checkpoints: `coop-eval`.
+
+    coop-eval --checkpoint runs/transport_hrl_n4_s0 --episodes 100 --seeds 0 1 2
+    coop-eval --checkpoint runs/m0 runs/m1 runs/m2 --n-agents 6   # zero-shot
+    coop-eval --checkpoint runs/transport_hrl_n4_s0 --video transport.mp4
+
+`--checkpoint` takes run directories (their newest checkpoint) or checkpoint
+directories; several are several trained models (the paper: 5 models x 100
+episodes). For each model and each seed, `--episodes` episodes are played
+with the policy's mean (`--stochastic` samples), spread over `--envs` copies
+that each play a fixed share, so short episodes are not over-represented.
+
+Prints the success rate and mean return with their standard errors over all
+models x seeds x episodes (and, for several models, the spread between
+models). The task and agent count default to the training ones; any other
+count works (one policy per species, fixed-size exteroception). `--video`
+films one episode (first model, first seed) headless, one frame per control
+step, with `coop_suite.camera.FramingCamera`.
+"""
+import dataclasses
+import json
+import os
+
+import numpy as np
+
+from runners import cli
+
+os.environ.setdefault('MUJOCO_GL', 'egl')
+
+
+@dataclasses.dataclass(frozen=True)
+class EvalArgs:
+  """What to evaluate (every field is a `coop-eval` flag)."""
+
+  checkpoint: tuple[str, ...] = ()
+  """Run or checkpoint directories, one per trained model."""
+  task: str = ''
+  """Task; empty for the training task."""
+  n_agents: int = 0
+  """Agents (ravine: crossers); 0 for the training count."""
+  episodes: int = 100
+  """Episodes per model and seed."""
+  seeds: tuple[int, ...] = (0,)
+  """Environment (and action noise) seeds."""
+  envs: int = 10
+  """Environment copies stepped together."""
+  stochastic: bool = False
+  """Sample commands instead of taking the policy's mean."""
+  stage: str = ''
+  """Ravine stage; empty for the training one."""
+  n_pushers: int = 0
+  """Ravine pushers; 0 for the training count."""
+  time_limit: float = 0.0
+  """Episode length (s); 0 for the training one."""
+  controller: str = ''
+  """Lower layer folder; empty for the run's own copy (else the shipped
+  weights)."""
+  video: str = ''
+  """mp4 file to film one episode into; empty for none."""
+  width: int = 640
+  height: int = 480
+
+  def __post_init__(self):
+    if not self.checkpoint:
+      raise ValueError('Give at least one --checkpoint DIR.')
+    if self.episodes < 1 or self.envs < 1 or not self.seeds:
+      raise ValueError('--episodes and --envs must be >= 1, --seeds given.')
+
+
+def load_model(path: str, args: EvalArgs):
+  """(EnvSpec, HierarchyConfig, {species: (Species, learner)}, state) of
+  the checkpoint at `path`, set up for the evaluation task."""
+  from agents.hierarchy import builder as hierarchy_builder  # pylint: disable=g-import-not-at-top
+  from agents.hierarchy import config as hierarchy_config  # pylint: disable=g-import-not-at-top
+  from runners import checkpoints  # pylint: disable=g-import-not-at-top
+  from runners import config as config_lib  # pylint: disable=g-import-not-at-top
+  from runners import envs as envs_lib  # pylint: disable=g-import-not-at-top
+  checkpoint = checkpoints.resolve(path)
+  state = checkpoints.read_state(checkpoint)
+  train = config_lib.TrainArgs.from_dict(state['args'])
+  overrides = {'task': args.task, 'n_agents': args.n_agents,
+               'stage': args.stage, 'n_pushers': args.n_pushers,
+               'time_limit': args.time_limit}
+  train = dataclasses.replace(
+      train, **{k: v for k, v in overrides.items() if v})
+  config = hierarchy_config.HierarchyConfig(**state['agent_config'])
+  files = None
+  if train.agent != 'flat':
+    copy = os.path.join(checkpoints.run_directory(checkpoint), 'controller')
+    files = envs_lib.read_controller(
+        train.paradigm, args.controller or (
+            copy if os.path.exists(os.path.join(copy, 'config.json')) else ''))
+  spec = envs_lib.EnvSpec(train.task, train.n_agents, train.env_options(),
+                          train.agent, train.command_period, files)
+  models = {}
+  for saved in state['species']:
+    species = envs_lib.Species(**{**saved, 'agents': tuple(saved['agents']),
+                                  'observation_keys': tuple(
+                                      saved['observation_keys'])})
+    builder = hierarchy_builder.HierarchyBuilder(config, species.species_id)
+    networks = builder.make_networks(species.observation_size,
+                                     species.action_size,
+                                     species.global_state_size)
+    learner = builder.make_learner(networks)
+    learner.restore(os.path.join(checkpoint, f'{species.name}.msgpack'))
+    models[species.name] = (species, builder, networks, learner)
+  return spec, config, models, {**state, 'checkpoint': checkpoint}
+
+
+def _actors(batch, models, seed, deterministic):
+  actors = {}
+  for s in batch.species:
+    if s.name not in models:
+      raise ValueError(f'The checkpoint has no policy for species {s.name!r}'
+                       f' (it has {sorted(models)}).')
+    trained, builder, networks, learner = models[s.name]
+    if s.observation_size != trained.observation_size:
+      raise ValueError(
+          f'{s.name}: this task gives {s.observation_size} observation '
+          f'features, the policy was trained on {trained.observation_size}.')
+    actors[s.name] = builder.make_actor(
+        networks, learner, actor_id=seed, action_bounds=s.action_bounds,
+        deterministic=deterministic)
+  return actors
+
+
+def _act(actors, batch, models):
+  actions = {}
+  for name, actor in actors.items():
+    observation, reset, _ = batch.rows[name]
+    size = models[name][0].global_state_size
+    # The centralised critic is not needed to act: zeros of its size.
+    state = None if size is None else np.zeros((len(reset), size),
+                                               np.float32)
+    actions[name] = actor.select_action(observation, reset, state)[0]
+  return actions
+
+
+def play(spec, config, models, seed: int, episodes: int, num_envs: int,
+         deterministic: bool = True) -> list[dict]:
+  """`episodes` episode metric dicts, `num_envs` copies playing fixed
+  shares."""
+  from runners import rollout  # pylint: disable=g-import-not-at-top
+  num_envs = min(num_envs, episodes)
+  seeds = np.random.SeedSequence([seed]).generate_state(num_envs) >> 1
+  batch = rollout.EnvBatch(spec, config, seeds, global_state=False)
+  quota = [episodes // num_envs + (e < episodes % num_envs)
+           for e in range(num_envs)]
+  results = [[] for _ in range(num_envs)]
+  actors = _actors(batch, models, seed, deterministic)
+  try:
+    while any(len(r) < q for r, q in zip(results, quota)):
+      _, ended, _ = batch.step(_act(actors, batch, models))
+      for episode in ended:
+        if len(results[episode['env']]) < quota[episode['env']]:
+          results[episode['env']].append(episode)
+  finally:
+    batch.close()
+  return [e for r in results for e in r]
+
+
+class _Filming:
+  """A bare environment that films itself until its first episode ends."""
+
+  def __init__(self, env, path, size):
+    import imageio  # pylint: disable=g-import-not-at-top
+    from coop_suite import camera  # pylint: disable=g-import-not-at-top
+    self._env, self._size = env, size
+    self._camera, self._render = camera.FramingCamera(), camera.render
+    self._writer = imageio.get_writer(
+        path, fps=round(1 / env.control_timestep()), codec='libx264',
+        quality=7, macro_block_size=8)
+    self.frames, self.done = 0, False
+
+  def __getattr__(self, name):
+    return getattr(self._env, name)
+
+  def _film(self):
+    if not self.done:
+      self._writer.append_data(self._render(self._env, self._camera,
+                                            *self._size))
+      self.frames += 1
+
+  def reset(self):
+    timestep = self._env.reset()
+    self._film()
+    return timestep
+
+  def step(self, action):
+    timestep = self._env.step(action)
+    self._film()
+    if timestep.last() and not self.done:
+      self.done = True
+      self._writer.close()
+    return timestep
+
+  def close(self):
+    if not self.done:
+      self._writer.close()
+    self._env.close()
+
+
+def film(spec, config, models, seed: int, path: str, size=(640, 480),
+         deterministic: bool = True) -> int:
+  """Writes one episode to the mp4 `path`; returns the number of frames."""
+  from runners import rollout  # pylint: disable=g-import-not-at-top
+  os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+  filming = []
+  batch = rollout.EnvBatch(
+      spec, config, [seed], global_state=False,
+      wrap_raw=lambda env: filming.append(_Filming(env, path, size))
+      or filming[-1])
+  try:
+    actors = _actors(batch, models, seed, deterministic)
+    while not filming[0].done:
+      batch.step(_act(actors, batch, models))
+  finally:
+    batch.close()
+  return filming[0].frames
+
+
+def _mean_and_error(values):
+  values = np.asarray(values, np.float64)
+  error = values.std(ddof=1) / np.sqrt(len(values)) if len(values) > 1 else 0.
+  return float(values.mean()), float(error)
+
+
+def evaluate(args: EvalArgs) -> dict:
+  """Plays every model x seed; returns the figures that `main` prints."""
+  per_model, episodes, description = [], [], None
+  for path in args.checkpoint:
+    spec, config, models, state = load_model(path, args)
+    description = (f'{spec.task} with {spec.n_agents} agents, agent '
+                   f'{config.agent}')
+    played = [e for seed in args.seeds for e in play(
+        spec, config, models, seed, args.episodes, args.envs,
+        not args.stochastic)]
+    episodes += played
+    per_model.append({'checkpoint': state['checkpoint'],
+                      'iteration': state['iteration'],
+                      'env_steps': state['env_steps'],
+                      'success': float(np.mean([e['success']
+                                                for e in played]))})
+    if args.video and len(per_model) == 1:
+      film(spec, config, models, args.seeds[0], args.video,
+           (args.width, args.height), not args.stochastic)
+  success, success_se = _mean_and_error([e['success'] for e in episodes])
+  ret, ret_se = _mean_and_error([e['return'] for e in episodes])
+  out = {'description': description, 'episodes': len(episodes),
+         'success': success, 'success_se': success_se, 'return': ret,
+         'return_se': ret_se, 'models': per_model}
+  if len(per_model) > 1:
+    out['success_se_models'] = _mean_and_error(
+        [m['success'] for m in per_model])[1]
+  return out
+
+
+def main(argv=None):
+  args = cli.parse(EvalArgs, argv, description=__doc__.splitlines()[0])
+  out = evaluate(args)
+  print(f'{out["description"]}: {len(args.checkpoint)} model(s) x '
+        f'{len(args.seeds)} seed(s) x {args.episodes} episodes')
+  for model in out['models']:
+    print(f'  {model["checkpoint"]} (iteration {model["iteration"]}, '
+          f'{model["env_steps"]} env steps): success '
+          f'{100 * model["success"]:.1f}%')
+  line = (f'success rate {100 * out["success"]:.1f}% +- '
+          f'{100 * out["success_se"]:.1f}% (standard error over '
+          f'{out["episodes"]} episodes)')
+  if 'success_se_models' in out:
+    line += f', +- {100 * out["success_se_models"]:.1f}% between models'
+  print(line)
+  print(f'mean return {out["return"]:.2f} +- {out["return_se"]:.2f}')
+  if args.video:
+    print(f'video: {args.video}')
+  print(json.dumps({k: out[k] for k in ('success', 'success_se', 'return',
+                                         'return_se', 'episodes')}))
+
+
+if __name__ == '__main__':
+  main()

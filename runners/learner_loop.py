@@ -1,0 +1,225 @@
+"""The learner's loop: synchronous on-policy PPO over a pool of actors.
+
+    summary = learner_loop.train(TrainArgs(task='transport', n_agents=4))
+
+One iteration (version v):
+  1. every species' variables (params, observation statistics) are fetched
+     from its `HierarchyLearner` once and handed to the pool (Ray: one
+     `ray.put`, every actor reads the reference);
+  2. every actor collects `sequence_length` commands of its copies with
+     version v (`RolloutWorker.collect`); a dead actor is restarted and its
+     rollout redone with the same version (`actor_pool.RayPool`);
+  3. each species' learner trains once on the union of its rows from all
+     actors (`types.concatenate`, in actor order, so a run is reproducible
+     whatever order the rollouts arrived in);
+  4. a row goes to metrics.csv / TensorBoard / the progress bar, and every
+     `checkpoint_every` iterations a checkpoint (`runners.checkpoints`).
+
+The run lasts ceil(total_steps / nominal steps per iteration) iterations,
+nominal = actors x envs_per_actor x sequence_length x low-level steps per
+command. Ctrl-C / SIGTERM stop after the current iteration with a
+checkpoint; `--resume` continues from the newest one.
+"""
+import dataclasses
+import math
+import os
+import time
+from typing import Any, Callable, Optional
+
+import jax
+import numpy as np
+
+from agents.hierarchy import builder as hierarchy_builder
+from agents.hierarchy import types
+from runners import actor_pool
+from runners import checkpoints
+from runners import config as config_lib
+from runners import envs as envs_lib
+from runners import metrics as metrics_lib
+from runners import rollout
+from runners import run_dir
+
+
+def check_run_directory(args: config_lib.TrainArgs) -> Optional[str]:
+  """The checkpoint to resume from (None for a new run); raises when the
+  directory holds another run or the settings differ from the saved ones."""
+  if args.resume:
+    checkpoint = checkpoints.resolve(args.logdir)
+    saved = checkpoints.read_state(checkpoint)
+    config_lib.check_resumable(saved['args'], args)
+    return checkpoint
+  if checkpoints.list_checkpoints(args.logdir) or os.path.exists(
+      os.path.join(args.logdir, 'metrics.csv')):
+    raise FileExistsError(f'{args.logdir} already holds a run: pass --resume '
+                          'or choose another --logdir.')
+  return None
+
+
+def environment_spec(args: config_lib.TrainArgs) -> envs_lib.EnvSpec:
+  """The run's environments, with its lower layer (copied into the run)."""
+  files = None
+  if args.agent != 'flat':
+    # The run keeps a copy of its lower layer: a resumed run and its
+    # evaluation use the controller the policy was trained with, whatever
+    # --controller says then.
+    copy = os.path.join(args.logdir, 'controller')
+    use_copy = args.resume and os.path.exists(os.path.join(copy,
+                                                           'config.json'))
+    files = envs_lib.read_controller(args.paradigm,
+                                     copy if use_copy else args.controller)
+    os.makedirs(copy, exist_ok=True)
+    for name, data in files.items():
+      with open(os.path.join(copy, name), 'wb') as f:
+        f.write(data)
+  os.makedirs(args.logdir, exist_ok=True)
+  return envs_lib.EnvSpec(args.task, args.n_agents, args.env_options(),
+                          args.agent, args.command_period, files)
+
+
+def probe(spec: envs_lib.EnvSpec, config):
+  """(species layout, episode metric keys, low-level steps per action,
+  control timestep) from one throw-away copy."""
+  env = spec.make(0)
+  try:
+    layout = envs_lib.species_layout(env, config)
+    env.reset()
+    n_actions = layout[0].action_size
+    env.step(np.zeros((env.n_agents, n_actions)))
+    keys = metrics_lib.episode_keys(env.episode_metrics())
+    dt = envs_lib.control_timestep(env)
+    per_action = int(round(env.control_timestep() / dt))
+  finally:
+    env.close()
+  return layout, keys, per_action, dt
+
+
+def train(args: config_lib.TrainArgs,
+          on_iteration: Optional[Callable[..., None]] = None
+          ) -> dict[str, Any]:
+  """Runs (or resumes) a run; returns its last row plus 'checkpoint'.
+
+  `on_iteration(iteration, row, pool)` is called after every iteration.
+  """
+  checkpoint = check_run_directory(args)
+  # Ray first: its processes are then not started from a process where JAX
+  # already runs threads.
+  owns_ray = args.actors > 0 and actor_pool.init_ray(
+      args.ray_address, num_cpus=max(os.cpu_count(), args.actors))
+  try:
+    return _train(args, checkpoint, on_iteration)
+  finally:
+    if owns_ray:
+      import ray  # pylint: disable=g-import-not-at-top
+      ray.shutdown()
+
+
+def _train(args, checkpoint, on_iteration):
+  config = config_lib.hierarchy_config(args)
+  spec = environment_spec(args)
+  layout, keys, per_action, dt = probe(spec, config)
+  for s in layout:
+    rows = args.num_actors * args.envs_per_actor * len(s.agents)
+    if rows % config.num_minibatches:
+      raise ValueError(
+          f'Species {s.name!r} has {rows} agents per iteration (actors x '
+          f'envs-per-actor x {len(s.agents)}), not divisible by '
+          f'--num-minibatches {config.num_minibatches}.')
+  learners = {}
+  for s in layout:
+    builder = hierarchy_builder.HierarchyBuilder(config, s.species_id)
+    learners[s.name] = builder.make_learner(builder.make_networks(
+        s.observation_size, s.action_size, s.global_state_size))
+  counters = {'iteration': 0, 'env_steps': 0, 'episodes': 0,
+              'wall_time': 0.0, 'restarts': 0}
+  window = metrics_lib.EpisodeWindow(keys, args.window, dt)
+  if checkpoint is not None:
+    saved = checkpoints.restore(checkpoint, learners)
+    counters.update({k: saved[k] for k in counters})
+    window.restore(saved.get('window', []))
+  state = {'args': args.to_dict(), 'agent_config': config_lib.json_safe(
+      dataclasses.asdict(config)), 'species': [s.to_dict() for s in layout]}
+  per_iteration = (args.num_actors * args.envs_per_actor
+                   * config.sequence_length * per_action)
+  iterations = math.ceil(args.total_steps / per_iteration)
+  n_agents = sum(len(s.agents) for s in layout)
+
+  log = run_dir.MetricsLog(
+      args.logdir, metrics_lib.columns(keys, learners),
+      resume_update=counters['iteration'] if checkpoint else None)
+  progress = metrics_lib.Progress(iterations * per_iteration,
+                                  counters['env_steps'], args.progress)
+  saved_at = counters['iteration']  # The iteration whose state is on disk.
+  restarts_at_start = counters['restarts']
+  learning = False
+  row = {}
+
+  def save():
+    return checkpoints.save(
+        args.logdir, learners,
+        {**counters, **state, 'window': window.state()},
+        args.keep_checkpoints)
+
+  pool = None
+  try:
+    pool = _make_pool(args, spec, config, counters['iteration'])
+    with run_dir.GracefulStop() as stop:
+      while counters['iteration'] < iterations and not stop.requested:
+        tick = time.perf_counter()
+        variables = {name: dict(zip(rollout.VARIABLE_NAMES, jax.device_get(
+            learner.get_variables(rollout.VARIABLE_NAMES))))
+                     for name, learner in learners.items()}
+        results = pool.collect(variables, counters['iteration'])
+        collected = time.perf_counter()
+        assert all(r.version == counters['iteration'] for r in results)
+        losses = {}
+        learning = True  # Learners change now: no checkpoint on error.
+        for name, learner in learners.items():
+          batch = types.concatenate([r.batches[name] for r in results])
+          losses.update(metrics_lib.learner_row(
+              name, jax.device_get(learner.step(batch))))
+        seconds = time.perf_counter() - tick
+        steps = sum(r.env_steps for r in results)
+        episodes = [e for r in results for e in r.episodes]
+        counters['iteration'] += 1
+        counters['env_steps'] += steps
+        counters['episodes'] += len(episodes)
+        counters['wall_time'] += seconds
+        counters['restarts'] = restarts_at_start + pool.restarts
+        learning = False
+        window.extend(episodes)
+        row = {'update': counters['iteration'],
+               'env_steps': counters['env_steps'],
+               'agent_steps': counters['env_steps'] * n_agents,
+               'wall_time': round(counters['wall_time'], 2),
+               'sps': steps / seconds, 'agent_sps': steps * n_agents / seconds,
+               'episodes': counters['episodes'], **window.summary(), **losses,
+               'time/collect': collected - tick,
+               'time/learn': seconds - (collected - tick),
+               'restarts': counters['restarts']}
+        log.write(row)
+        progress.update(row, steps)
+        if (counters['iteration'] % args.checkpoint_every == 0
+            or counters['iteration'] == iterations or stop.requested):
+          save()
+          saved_at = counters['iteration']
+        if on_iteration is not None:
+          on_iteration(counters['iteration'], row, pool)
+  except BaseException:
+    if not learning and saved_at < counters['iteration']:
+      save()  # The last complete iteration is not lost.
+    raise
+  finally:
+    progress.close()
+    log.close()
+    if pool is not None:
+      pool.close()
+  return {**row, 'iterations': iterations,
+          'checkpoint': (checkpoints.list_checkpoints(args.logdir) or [''])[-1]}
+
+
+def _make_pool(args, spec, config, iteration):
+  seeds = actor_pool.worker_seeds(args.seed, iteration, args.num_actors)
+  if args.actors == 0:
+    return actor_pool.LocalPool(spec, config, args.envs_per_actor, seeds[0])
+  return actor_pool.RayPool(spec, config, args.envs_per_actor, seeds,
+                            max_restarts=args.max_actor_restarts)

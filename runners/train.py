@@ -1,0 +1,35 @@
+"""Trains the cooperative agents with actors on Ray: `coop-train`.
+
+    coop-train --task transport --n-agents 4                   # local Ray
+    coop-train --task corridor --agent no_memory --actors 8 --envs-per-actor 16
+    coop-train --task ravine --stage pushers --n-agents 2 --n-pushers 2
+    coop-train --task transport --ray-address auto             # a cluster
+    coop-train --task transport --actors 0 --total-steps 20000 # no Ray
+    coop-train --task transport --resume                       # continue
+
+Writes to --logdir (default runs/<task>_<agent>_n<N>_s<seed>): metrics.csv
+and TensorBoard events (every reward term, success, losses, steps/s),
+checkpoints/ckpt_<iteration>/ (atomic, the newest --keep-checkpoints kept),
+controller/ (the lower layer the run uses). See docs/training.md.
+Evaluate with `coop-eval --checkpoint <logdir>`.
+"""
+import json
+import os
+
+from runners import cli
+from runners import config as config_lib
+
+
+def main(argv=None):
+  args = cli.parse(config_lib.TrainArgs, argv,
+                   description=__doc__.splitlines()[0])
+  from runners import learner_loop  # pylint: disable=g-import-not-at-top
+  summary = learner_loop.train(args)
+  keys = ('update', 'env_steps', 'return', 'success', 'wall_time')
+  print(json.dumps({k: summary.get(k) for k in keys}))
+  print(f'checkpoint: {summary["checkpoint"]}')
+  print(f'evaluate:   coop-eval --checkpoint {os.path.abspath(args.logdir)}')
+
+
+if __name__ == '__main__':
+  main()

@@ -1,0 +1,312 @@
+"""The lower layer: vector env, pretraining CLI, controller, CommandWrapper.
+
+Everything runs on tiny budgets: a 2-update pretraining run with 16-unit
+networks supplies the controller that the other tests load.
+"""
+import csv
+import dataclasses
+import json
+import os
+
+import dm_env
+import numpy as np
+import pytest
+
+import coop_suite
+from agents import lowlevel
+from agents import observations as obs_lib
+from agents.lowlevel import controller as controller_lib
+from runners import pretrain_locomotion
+from runners import vector_env
+
+TINY = ['--num-envs', '8', '--unroll-length', '8', '--num-workers', '0',
+        '--hidden', '16', '--num-minibatches', '2', '--checkpoint-every', '1',
+        '--no-progress']
+
+
+# --- Observations and vector env ---------------------------------------------
+
+
+def test_flatten_key_order_and_shapes():
+  env = coop_suite.load('walk_to_target', 1, seed=0)
+  observation = env.reset().observation[0]
+  keys = obs_lib.observation_keys(observation)
+  assert keys[-1] == 'command/target' and keys[0] == 'proprio/angular_velocity'
+  assert list(keys[:-1]) == sorted(keys[:-1])
+  flat = obs_lib.flatten(observation, keys)
+  assert flat.shape == (36,) and flat.dtype == np.float32
+  np.testing.assert_allclose(flat[-2:], observation['command/target'],
+                             rtol=1e-6)
+  stacked = {k: np.stack([v, v]) for k, v in observation.items()}
+  np.testing.assert_array_equal(obs_lib.flatten(stacked, keys), [flat, flat])
+  with pytest.raises(ValueError, match='command'):
+    obs_lib.observation_keys({'proprio/a': 0})
+
+
+def test_vector_env_seeding_and_auto_reset():
+  # 0.25 s episodes: 5 control steps, then a time-limit end.
+  make = vector_env.make_env_fn('walk_to_target', time_limit=0.25)
+  actions = np.random.default_rng(0).uniform(-1, 1, (7, 3, 1, 8))
+  runs = {}
+  for workers in (0, 2):
+    with vector_env.VectorEnv(make, 3, seed=5, num_workers=workers) as envs:
+      first = envs.reset()
+      steps = [envs.step(a) for a in actions]
+    runs[workers] = (first, steps)
+    assert first.observation.shape == (3, 1, 36)
+    assert (first.step_type == vector_env.FIRST).all()
+    # Copies differ (seeds 5, 6, 7); copy 0 is `load(seed=5)`'s episode.
+    assert not np.allclose(first.observation[0], first.observation[1])
+    alone = coop_suite.load('walk_to_target', 1, seed=5, time_limit=0.25)
+    np.testing.assert_allclose(
+        first.observation[0, 0],
+        obs_lib.flatten(alone.reset().observation[0], envs.observation_keys),
+        rtol=1e-6)
+    last = steps[4]
+    assert (last.step_type == vector_env.LAST).all()
+    assert last.truncation.all() and (last.discount == 1).all()
+    assert sorted(e['env'] for e in last.episodes) == [0, 1, 2]
+    assert all(e['length'] == 5 and e['truncated'] for e in last.episodes)
+    assert 'target_distance' in last.episodes[0]
+    # The next episode's first observation, the old one's last kept apart.
+    assert not np.allclose(last.observation, last.final_observation)
+    assert (steps[5].step_type == vector_env.MID).all()
+    assert not any(s.episodes for s in steps[:4] + steps[5:])
+  for a, b in zip(runs[0][1], runs[2][1]):  # Workers change nothing.
+    np.testing.assert_array_equal(a.observation, b.observation)
+    np.testing.assert_array_equal(a.reward, b.reward)
+
+
+def test_vector_env_reports_a_fall_as_termination():
+  # Nothing stands above 10 m: the Ant counts as fallen at once.
+  make = vector_env.make_env_fn('walk_to_target', fall_height=10.0)
+  with vector_env.VectorEnv(make, 2, num_workers=0) as envs:
+    envs.reset()
+    step = envs.step(np.zeros((2, 1, 8)))
+  assert (step.step_type == vector_env.LAST).all()
+  assert (step.discount == 0).all() and not step.truncation.any()
+  assert all(e['failure'] and not e['truncated'] for e in step.episodes)
+
+
+def test_vector_env_worker_errors_surface():
+  with pytest.raises(RuntimeError, match='worker failed'):
+    vector_env.VectorEnv(vector_env.make_env_fn('no_such_task'), 2,
+                         num_workers=1)
+
+
+# --- Pretraining CLI ------------------------------------------------------------
+
+
+@pytest.fixture(scope='module')
+def tiny_run(tmp_path_factory):
+  """A 2-update position run (8 envs x 8 steps), then --resume to 3."""
+  logdir = str(tmp_path_factory.mktemp('pretrain') / 'run')
+  argv = ['--paradigm', 'position', '--logdir', logdir, *TINY]
+  pretrain_locomotion.main(argv + ['--total-env-steps', '128'])
+  with open(os.path.join(logdir, 'metrics.csv')) as f:
+    first_rows = list(csv.DictReader(f))
+  checkpoints_before = sorted(os.listdir(os.path.join(logdir, 'checkpoints')))
+  pretrain_locomotion.main(argv + ['--total-env-steps', '192', '--resume'])
+  return logdir, first_rows, checkpoints_before
+
+
+def test_pretrain_writes_metrics_checkpoints_and_resumes(tiny_run):
+  logdir, first_rows, checkpoints_before = tiny_run
+  assert [int(r['env_steps']) for r in first_rows] == [64, 128]
+  assert checkpoints_before == ['ckpt_00000001.json', 'ckpt_00000001.msgpack',
+                                'ckpt_00000002.json', 'ckpt_00000002.msgpack']
+  for row in first_rows:
+    assert np.isfinite(float(row['total_loss']))
+    assert float(row['wall_time']) > 0
+  with open(os.path.join(logdir, 'metrics.csv')) as f:
+    rows = list(csv.DictReader(f))
+  assert [int(r['update']) for r in rows] == [1, 2, 3]
+  assert int(rows[-1]['env_steps']) == 192
+  # The last three are kept.
+  assert sorted(os.listdir(os.path.join(logdir, 'checkpoints')))[-1] == (
+      'ckpt_00000003.msgpack')
+  with open(os.path.join(logdir, 'controller', 'config.json')) as f:
+    config = json.load(f)
+  assert config['training']['env_steps'] == 192
+  assert config['env_config']['resample_on_reach'] is False
+  assert any(n.startswith('events.out.tfevents') for n in os.listdir(logdir))
+  with pytest.raises(FileExistsError, match='--resume'):
+    pretrain_locomotion.main(['--paradigm', 'position', '--logdir', logdir,
+                              *TINY, '--total-env-steps', '64'])
+  with pytest.raises(ValueError, match='differs'):
+    pretrain_locomotion.main(['--paradigm', 'position', '--logdir', logdir,
+                              *TINY, '--resume', '--learning-rate', '1e-3'])
+
+
+# --- Controller -------------------------------------------------------------------
+
+
+@pytest.fixture(scope='module')
+def controller(tiny_run):
+  return lowlevel.load('position', os.path.join(tiny_run[0], 'controller'))
+
+
+def test_controller_acts_in_bounds_single_and_batched_agree(controller):
+  env = coop_suite.load('walk_to_target', 1, seed=3)
+  observations = []
+  timestep = env.reset()
+  for _ in range(4):
+    observations.append(timestep.observation[0])
+    timestep = env.step([controller(timestep.observation[0])])
+  single = np.stack([controller(o) for o in observations])
+  assert single.shape == (4, 8) and single.dtype == np.float32
+  assert np.all(np.abs(single) <= 1.0)
+  np.testing.assert_allclose(controller.batch(observations), single,
+                             rtol=1e-5, atol=1e-6)
+  stacked = {k: np.stack([o[k] for o in observations])
+             for k in observations[0]}
+  np.testing.assert_allclose(controller.batch(stacked), single, rtol=1e-5,
+                             atol=1e-6)
+  np.testing.assert_array_equal(controller(observations[0]), single[0])
+  with pytest.raises(dataclasses.FrozenInstanceError):
+    controller.paradigm = 'velocity'
+
+
+def test_controller_loading_checks_paradigm_and_files(tiny_run, tmp_path):
+  with pytest.raises(ValueError, match="not 'velocity'"):
+    lowlevel.load('velocity', os.path.join(tiny_run[0], 'controller'))
+  with pytest.raises(FileNotFoundError, match='params.msgpack'):
+    lowlevel.load('position', str(tmp_path))
+  with pytest.raises(ValueError, match='paradigm'):
+    lowlevel.load('running')
+
+
+# --- CommandWrapper -------------------------------------------------------------
+
+
+class _Recorder:
+  """Delegates to a controller and records what the wrapper fed it."""
+
+  def __init__(self, controller):
+    self._controller = controller
+    self.inputs = []
+
+  def __getattr__(self, name):
+    return getattr(self._controller, name)
+
+  def batch(self, observations):
+    self.inputs.append({k: np.array(v) for k, v in observations.items()})
+    return self._controller.batch(observations)
+
+
+def test_command_wrapper_specs_and_episode_boundaries(controller):
+  # 0.6 s episodes, 0.25 s commands: 5 + 5 low-level steps, then 2 (early end).
+  env = lowlevel.CommandWrapper(
+      coop_suite.load('transport', 4, seed=0, time_limit=0.6), controller,
+      command_period=0.25)
+  assert env.low_level_steps == 5 and env.control_timestep() == 0.25
+  specs = env.action_spec()
+  assert len(specs) == 4 and specs[0].shape == (2,)
+  assert specs[0].minimum == -3.0 and specs[0].maximum == 3.0
+  assert env.observation_spec() == env.env.observation_spec()
+  for _ in range(2):  # Two episodes: the wrapper resets after LAST.
+    timestep = env.reset()
+    assert timestep.first()
+    assert 'extero/cylinder' in timestep.observation[0]
+    types = []
+    while not timestep.last():
+      timestep = env.step(np.full((4, 2), 1.0))
+      types.append(timestep.step_type)
+      assert len(timestep.reward) == 4
+      assert all(isinstance(r, np.float32) for r in timestep.reward)
+    assert types == [dm_env.StepType.MID, dm_env.StepType.MID,
+                     dm_env.StepType.LAST]
+    assert float(timestep.discount) == 1.0  # Time limit, not a failure.
+    assert env.episode_metrics()['control_steps'] == 12
+  assert env.step(np.zeros((4, 2))).first()  # Auto-reset like composer.
+  with pytest.raises(ValueError, match=r'\(4, 2\)'):
+    env.step(np.zeros((3, 2)))
+  with pytest.raises(ValueError, match='NaN'):
+    env.step(np.full((4, 2), np.nan))
+  with pytest.raises(ValueError, match='multiple'):
+    lowlevel.CommandWrapper(env.env, controller, command_period=0.07)
+
+
+def test_command_wrapper_feeds_heading_frame_commands(controller):
+  recorder = _Recorder(controller)
+  env = lowlevel.CommandWrapper(coop_suite.load('transport', 2, seed=1),
+                                recorder, command_period=0.5)
+  env.reset()
+  command = np.array([[2.0, -1.0], [9.0, 0.5]])  # Agent 1's x is clipped.
+  env.step(command)
+  fed = recorder.inputs
+  assert len(fed) == 10
+  # At issue time the offset to the world target is the command itself...
+  np.testing.assert_allclose(fed[0]['command/target'],
+                             [[2.0, -1.0], [3.0, 0.5]], atol=1e-9)
+  # ...and it then follows the agent, to the same world target throughout.
+  frames = env._frames()  # pylint: disable=protected-access
+  np.testing.assert_allclose(
+      frames.to_heading_frame(env.world_commands),
+      env._controller_inputs()['command/target'])  # pylint: disable=protected-access
+  assert fed[0]['proprio/joints_pos'].shape == (2, 8)
+
+
+def test_command_wrapper_velocity_paradigm(controller, tmp_path):
+  # The tiny position network relabelled as a velocity controller.
+  config = dict(controller.config)
+  config['paradigm'] = 'velocity'
+  config['observation_keys'] = [k.replace('command/target', 'command/velocity')
+                                for k in controller.observation_keys]
+  controller_lib.save(str(tmp_path), controller.params, controller.normalizer,
+                      config)
+  velocity = lowlevel.load('velocity', str(tmp_path))
+  recorder = _Recorder(velocity)
+  env = lowlevel.CommandWrapper(coop_suite.load('corridor', 2, seed=0),
+                                recorder, command_period=0.1)
+  assert env.action_spec()[0].maximum == 1.0
+  env.reset()
+  env.step(np.array([[0.6, 0.0], [3.0, 4.0]]))  # Norm clipped to 1 m/s.
+  first = recorder.inputs[0]['command/velocity']
+  np.testing.assert_allclose(first[0], [0.6, 0.0], atol=1e-9)
+  np.testing.assert_allclose(np.linalg.norm(first[1]), 1.0, atol=1e-9)
+  # World-fixed: the world command's norm stays the commanded speed.
+  np.testing.assert_allclose(np.linalg.norm(env.world_commands, axis=1),
+                             [0.6, 1.0], atol=1e-9)
+
+
+# --- CLI helpers and evaluation -------------------------------------------------
+
+
+def test_cli_documents_every_flag_from_field_docstrings(capsys):
+  from runners import cli  # pylint: disable=g-import-not-at-top
+  docs = cli.field_docs(pretrain_locomotion.Args)
+  assert set(docs) == {f.name for f in dataclasses.fields(
+      pretrain_locomotion.Args)}
+  args = cli.parse(pretrain_locomotion.Args,
+                   ['--paradigm', 'velocity', '--hidden', '32', '32',
+                    '--no-progress'])
+  assert args.hidden == (32, 32) and not args.progress
+  assert args.logdir == 'runs/lowlevel_velocity'
+  with pytest.raises(SystemExit):
+    cli.parse(pretrain_locomotion.Args, ['--help'])
+  assert 'reward scaling' in capsys.readouterr().out.lower().replace('_', ' ')
+  with pytest.raises(ValueError, match='paradigm'):
+    pretrain_locomotion.Args(paradigm='running')
+
+
+def test_eval_lowlevel_reports_means_and_errors(tiny_run):
+  from runners import eval_lowlevel  # pylint: disable=g-import-not-at-top
+  results = eval_lowlevel.evaluate(eval_lowlevel.EvalArgs(
+      controller=os.path.join(tiny_run[0], 'controller'), episodes=2,
+      time_limit=0.5))
+  assert set(results) >= {'success', 'final_distance', 'fall', 'return'}
+  mean, se = results['final_distance']
+  assert mean > 0 and np.isfinite(se)
+
+
+_SHIPPED = os.path.join(lowlevel.WEIGHTS_DIR, 'position', 'config.json')
+
+
+@pytest.mark.skipif(not os.path.exists(_SHIPPED),
+                    reason='no shipped position controller yet')
+def test_shipped_position_controller_walks_to_targets():
+  from runners import eval_lowlevel  # pylint: disable=g-import-not-at-top
+  results = eval_lowlevel.evaluate(eval_lowlevel.EvalArgs(episodes=5))
+  assert results['fall'][0] == 0.0
+  assert results['success'][0] >= 0.8, results

@@ -1,0 +1,206 @@
+"""coop-train and coop-eval on tiny budgets: every variant learns in one
+process, checkpoints resume, Ray actors collect and survive `kill -9`."""
+import csv
+import dataclasses
+import os
+import shutil
+import signal
+import threading
+
+import jax
+import numpy as np
+import pytest
+
+import coop_suite
+from agents import normalization
+from agents import observations as obs_lib
+from agents.hierarchy import builder as hierarchy_builder
+from agents.hierarchy import config as hierarchy_config
+from agents.lowlevel import controller as controller_lib
+from agents.networks import policy_value
+from agents.ppo import config as ppo_config
+from runners import actor_pool
+from runners import checkpoints
+from runners import config as config_lib
+from runners import envs as envs_lib
+from runners import evaluate
+from runners import learner_loop
+from runners import train
+
+# 2 copies x 4 commands of 0.1 s (2 control steps): 16 env steps/iteration.
+TINY = dict(n_agents=2, actors=0, envs_per_actor=2, command_period=0.1,
+            sequence_length=4, num_minibatches=2, num_epochs=1,
+            upper_layer_sizes=(16,), middle_layer_size=8, head_sizes=(8,),
+            critic_sizes=(8,), flat_sizes=(16,), time_limit=0.8,
+            progress=False)
+STEPS = 16
+# Ray and ffmpeg start processes with fork + exec, which JAX's fork warning
+# cannot tell from a bare fork.
+pytestmark = pytest.mark.filterwarnings('ignore:os.fork:RuntimeWarning')
+VARIANT_TASKS = {'hrl': 'transport', 'no_memory': 'corridor',
+                 'flat': 'ravine', 'mappo': 'ravine'}
+
+
+@pytest.fixture(scope='module')
+def controller(tmp_path_factory):
+  """A tiny random lower layer in the shipped format."""
+  directory = str(tmp_path_factory.mktemp('controller'))
+  spec = coop_suite.load('walk_to_target').observation_spec()[0]
+  keys = obs_lib.observation_keys(spec)
+  sizes = obs_lib.observation_sizes(spec, keys)
+  networks = policy_value.make_policy_value_networks(sum(sizes), 8, (8,), (8,))
+  controller_lib.save(
+      directory, networks.init(jax.random.PRNGKey(0))['policy'],
+      normalization.init(sum(sizes)),
+      {'paradigm': 'position', 'observation_keys': list(keys),
+       'observation_sizes': list(sizes), 'action_size': 8,
+       'ppo_config': dataclasses.asdict(ppo_config.PPOConfig(
+           policy_hidden=(8,), value_hidden=(8,)))})
+  return directory
+
+
+def _args(logdir, controller, **overrides):
+  values = {**TINY, 'task': 'transport', 'logdir': str(logdir),
+            'controller': controller, 'total_steps': 2 * STEPS, **overrides}
+  if values['task'] == 'ravine':
+    values.update(n_agents=1, n_pushers=1)
+  return config_lib.TrainArgs(**values)
+
+
+def _rows(logdir):
+  with open(os.path.join(logdir, 'metrics.csv')) as f:
+    return list(csv.DictReader(f))
+
+
+def _learner_params(checkpoint, species):
+  """(initial params, checkpointed params) of one species."""
+  state = checkpoints.read_state(checkpoint)
+  config = hierarchy_config.HierarchyConfig(**state['agent_config'])
+  saved = next(s for s in state['species'] if s['name'] == species)
+  builder = hierarchy_builder.HierarchyBuilder(config, saved['species_id'])
+  learner = builder.make_learner(builder.make_networks(
+      saved['observation_size'], saved['action_size'],
+      saved['global_state_size']))
+  initial = jax.device_get(learner.get_variables(['params'])[0])
+  learner.restore(os.path.join(checkpoint, f'{species}.msgpack'))
+  return initial, jax.device_get(learner.get_variables(['params'])[0])
+
+
+@pytest.fixture(scope='module')
+def hrl_run(tmp_path_factory, controller):
+  """Two iterations of 'hrl' through the real CLI, in one process."""
+  logdir = str(tmp_path_factory.mktemp('runs') / 'hrl')
+  argv = ['--task', 'transport', '--logdir', logdir, '--controller',
+          controller, '--total-steps', str(2 * STEPS)]
+  for name, value in TINY.items():
+    flag = '--' + name.replace('_', '-')
+    if isinstance(value, bool):
+      argv.append(flag if value else '--no-' + flag[2:])
+    elif isinstance(value, tuple):
+      argv += [flag, *map(str, value)]
+    else:
+      argv += [flag, str(value)]
+  train.main(argv)
+  return logdir
+
+
+@pytest.mark.parametrize('agent', sorted(VARIANT_TASKS))
+def test_variant_trains_in_process(agent, controller, hrl_run, tmp_path):
+  # 'flat' acts every control step: 8 env steps per iteration.
+  total = 2 * (STEPS // 2 if agent == 'flat' else STEPS)
+  if agent == 'hrl':
+    logdir = hrl_run
+  else:
+    logdir = str(tmp_path / agent)
+    learner_loop.train(_args(logdir, controller, agent=agent,
+                             task=VARIANT_TASKS[agent], total_steps=total))
+  rows = _rows(logdir)
+  assert [int(r['update']) for r in rows] == [1, 2]
+  assert int(rows[-1]['env_steps']) == total
+  losses = [k for k in rows[0] if k.startswith('learner/')]
+  assert losses and all(np.isfinite(float(r[k])) for r in rows for k in losses)
+  last = checkpoints.resolve(logdir)
+  species = [s['name'] for s in checkpoints.read_state(last)['species']]
+  assert species == (['crosser', 'pusher'] if VARIANT_TASKS[agent] == 'ravine'
+                     else ['ant'])
+  for name in species:
+    initial, trained = _learner_params(last, name)
+    moved = [not np.array_equal(a, b) for a, b in
+             zip(jax.tree.leaves(initial), jax.tree.leaves(trained))]
+    assert all(moved), (agent, name)
+
+
+def test_checkpoints_keep_the_newest_and_resume_continues(controller, hrl_run,
+                                                          tmp_path):
+  logdir = str(tmp_path / 'resumed')
+  shutil.copytree(hrl_run, logdir)
+  first = checkpoints.read_state(checkpoints.resolve(logdir))
+  assert (first['iteration'], first['env_steps']) == (2, 2 * STEPS)
+  with pytest.raises(FileExistsError, match='--resume'):
+    learner_loop.train(_args(logdir, controller))
+  with pytest.raises(ValueError, match='--agent'):
+    learner_loop.train(_args(logdir, controller, agent='no_memory',
+                             resume=True))
+  summary = learner_loop.train(_args(logdir, controller, resume=True,
+                                     total_steps=5 * STEPS))
+  assert (summary['update'], summary['env_steps']) == (5, 5 * STEPS)
+  assert [int(r['update']) for r in _rows(logdir)] == [1, 2, 3, 4, 5]
+  kept = checkpoints.list_checkpoints(logdir)
+  assert [os.path.basename(p) for p in kept] == [
+      'ckpt_00000003', 'ckpt_00000004', 'ckpt_00000005']
+  state = checkpoints.read_state(kept[-1])
+  assert state['episodes'] > first['episodes']
+  assert state['args']['total_steps'] == 5 * STEPS
+  # The run's lower layer travels with it.
+  assert sorted(os.listdir(os.path.join(logdir, 'controller'))) == sorted(
+      envs_lib.CONTROLLER_FILES)
+
+
+def test_missing_controller_says_how_to_make_one(tmp_path):
+  with pytest.raises(FileNotFoundError, match='coop-pretrain-lowlevel'):
+    envs_lib.read_controller('position', str(tmp_path))
+
+
+@pytest.fixture(scope='module')
+def ray_cluster():
+  import ray  # pylint: disable=g-import-not-at-top
+  assert actor_pool.init_ray(num_cpus=2)
+  yield ray
+  ray.shutdown()
+
+
+def test_ray_actors_survive_kill_minus_9(ray_cluster, controller, tmp_path):
+  del ray_cluster
+  killed = []
+
+  def kill_one_actor(iteration, row, pool):
+    if iteration == 2:
+      pids = pool.pids()
+      assert len(set(pids)) == 2 and os.getpid() not in pids
+      # Killed while the next rollouts are being collected.
+      timer = threading.Timer(0.05, os.kill, (pids[1], signal.SIGKILL))
+      timer.start()
+      killed.append(timer)
+
+  summary = learner_loop.train(
+      _args(tmp_path / 'ray', controller, actors=2, envs_per_actor=1,
+            total_steps=5 * STEPS),
+      on_iteration=kill_one_actor)
+  killed[0].join()
+  assert summary['update'] == summary['iterations'] == 5
+  assert summary['env_steps'] == 5 * STEPS
+  assert summary['restarts'] == 1
+  rows = _rows(tmp_path / 'ray')
+  assert [int(r['update']) for r in rows] == [1, 2, 3, 4, 5]
+  assert int(rows[-1]['restarts']) == 1
+
+
+def test_evaluation_prints_success_rate_and_films(hrl_run, tmp_path, capsys):
+  video = tmp_path / 'episode.mp4'
+  evaluate.main(['--checkpoint', hrl_run, '--episodes', '3', '--seeds', '0',
+                 '1', '--envs', '2', '--n-agents', '3', '--video', str(video),
+                 '--width', '64', '--height', '48'])
+  out = capsys.readouterr().out
+  assert 'transport with 3 agents' in out
+  assert 'success rate 0.0% +- 0.0% (standard error over 6 episodes)' in out
+  assert video.stat().st_size > 0
