@@ -40,8 +40,9 @@ def restore_state(path: str, template: Any, kind: str,
   """
   with open(path, 'rb') as f:
     contents = serialization.msgpack_restore(f.read())
+  # Files written before `kind` existed (early PPO checkpoints) carry none.
   if (contents.get('format') != format_version
-      or contents.get('kind') != kind):
+      or contents.get('kind', kind) != kind):
     raise ValueError(f'{path} is not a {kind} checkpoint of format '
                      f'{format_version}.')
   try:

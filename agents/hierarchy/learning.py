@@ -19,6 +19,7 @@ from agents import normalization
 from agents.hierarchy import config as hierarchy_config
 from agents.hierarchy import networks as hierarchy_networks
 from agents.hierarchy import types
+from agents.ppo import learning as ppo_learning
 from agents.ppo import losses
 from agents.ppo import types as ppo_types
 
@@ -47,10 +48,8 @@ class TrainingState(NamedTuple):
 
 def make_optimizer(
     config: hierarchy_config.HierarchyConfig) -> optax.GradientTransformation:
-  """Adam after global-norm gradient clipping."""
-  return optax.chain(
-      optax.clip_by_global_norm(config.max_grad_norm),
-      optax.adam(config.learning_rate, eps=config.adam_epsilon))
+  """Adam after global-norm gradient clipping, as the PPO learner's."""
+  return ppo_learning.make_optimizer(config)
 
 
 def make_initial_state(networks: hierarchy_networks.HierarchyNetworks,

@@ -8,14 +8,13 @@ Minibatches are drawn by permuting the batch axis B and keeping time whole
 (PureJaxRL's recurrent layout), so a recurrent learner can reuse this scheme
 with sequences that start from stored hidden states.
 """
-import os
 from typing import Any, Iterator, NamedTuple, Optional, Sequence
 
-from flax import serialization
 import jax
 import jax.numpy as jnp
 import optax
 
+from agents import checkpointing
 from agents import core
 from agents import normalization
 from agents.networks import policy_value
@@ -24,6 +23,7 @@ from agents.ppo import losses
 from agents.ppo import types
 
 _CHECKPOINT_FORMAT = 1
+_CHECKPOINT_KIND = 'ppo'
 
 
 class TrainingState(NamedTuple):
@@ -206,34 +206,13 @@ class PPOLearner(core.Learner):
     return [variables[name] for name in names]
 
   def save(self, path: str) -> None:
-    """Writes the full training state to `path` (flax msgpack), atomically.
-
-    The file is written next to `path` and moved over it with `os.replace`,
-    so a crash never leaves a truncated checkpoint behind.
-    """
-    state_dict = serialization.to_state_dict(jax.device_get(self._state))
-    data = serialization.msgpack_serialize(
-        {'format': _CHECKPOINT_FORMAT, 'state': state_dict})
-    directory = os.path.dirname(os.path.abspath(path))
-    os.makedirs(directory, exist_ok=True)
-    tmp_path = f'{path}.tmp-{os.getpid()}'
-    with open(tmp_path, 'wb') as f:
-      f.write(data)
-      f.flush()
-      os.fsync(f.fileno())
-    os.replace(tmp_path, path)
+    """Writes the full training state to `path`, atomically (see
+    `agents.checkpointing`)."""
+    checkpointing.save_state(path, self._state, _CHECKPOINT_KIND,
+                             _CHECKPOINT_FORMAT)
 
   def restore(self, path: str) -> None:
     """Loads a file written by `save` with the same networks and config."""
-    with open(path, 'rb') as f:
-      contents = serialization.msgpack_restore(f.read())
-    if contents.get('format') != _CHECKPOINT_FORMAT:
-      raise ValueError(f'{path} is not a PPO checkpoint of format '
-                       f'{_CHECKPOINT_FORMAT}.')
-    state = serialization.from_state_dict(self._state, contents['state'])
-    state = jax.tree.map(jnp.asarray, state)
-    expected = jax.tree.map(jnp.shape, self._state)
-    if jax.tree.map(jnp.shape, state) != expected:
-      raise ValueError(f'{path} holds parameters of other shapes; was it '
-                       'written with different networks or config?')
-    self._state = state
+    self._state = checkpointing.restore_state(path, self._state,
+                                              _CHECKPOINT_KIND,
+                                              _CHECKPOINT_FORMAT)
