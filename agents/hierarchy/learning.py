@@ -133,20 +133,11 @@ def make_update_fn(networks: hierarchy_networks.HierarchyNetworks,
     _, dist_params, values = networks.unroll(
         params, minibatch.initial_carry, minibatch.steps.observation,
         minibatch.reset, minibatch.global_state)
-    return losses.ppo_loss(
-        dist_params, values, minibatch.steps, networks.distribution, key,
-        clip_epsilon=config.clip_epsilon,
-        clip_value_loss=config.clip_value_loss,
-        entropy_cost=config.entropy_cost, value_cost=config.value_cost,
-        normalize_advantages=config.normalize_advantages)
+    return losses.ppo_loss(dist_params, values, minibatch.steps,
+                           networks.distribution, key,
+                           **ppo_learning.loss_options(config))
 
-  def sgd_step(carry, minibatch_and_key):
-    params, opt_state = carry
-    minibatch, key = minibatch_and_key
-    grads, metrics = jax.grad(loss_fn, has_aux=True)(params, minibatch, key)
-    metrics['grad_norm'] = optax.tree.norm(grads)  # Before clipping.
-    updates, opt_state = optimizer.update(grads, opt_state, params)
-    return (optax.apply_updates(params, updates), opt_state), metrics
+  sgd_step = ppo_learning.make_sgd_step(loss_fn, optimizer)
 
   def epoch(carry, key, batch: types.SequenceTrainingBatch):
     permutation_key, loss_key = jax.random.split(key)

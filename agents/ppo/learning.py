@@ -51,6 +51,31 @@ def make_optimizer(
       optax.adam(config.learning_rate, eps=config.adam_epsilon))
 
 
+def loss_options(config) -> dict:
+  """The keyword options of `losses.ppo_loss` taken from a PPO-style config
+  (shared by this learner and `agents.hierarchy`)."""
+  return dict(clip_epsilon=config.clip_epsilon,
+              clip_value_loss=config.clip_value_loss,
+              entropy_cost=config.entropy_cost, value_cost=config.value_cost,
+              normalize_advantages=config.normalize_advantages)
+
+
+def make_sgd_step(loss_fn, optimizer: optax.GradientTransformation):
+  """One minibatch gradient step, shaped for `jax.lax.scan` over minibatches.
+
+  `loss_fn(params, minibatch, key) -> (loss, metrics)`; the step's carry is
+  `(params, opt_state)` and its input `(minibatch, key)`.
+  """
+  def sgd_step(carry, minibatch_and_key):
+    params, opt_state = carry
+    minibatch, key = minibatch_and_key
+    grads, metrics = jax.grad(loss_fn, has_aux=True)(params, minibatch, key)
+    metrics['grad_norm'] = optax.tree.norm(grads)  # Before clipping.
+    updates, opt_state = optimizer.update(grads, opt_state, params)
+    return (optax.apply_updates(params, updates), opt_state), metrics
+  return sgd_step
+
+
 def make_initial_state(networks: policy_value.PolicyValueNetworks,
                        optimizer: optax.GradientTransformation,
                        key: jax.Array) -> TrainingState:
@@ -99,20 +124,10 @@ def make_update_fn(networks: policy_value.PolicyValueNetworks,
   def loss_fn(params, batch, key):
     dist_params = networks.apply_policy(params, batch.observation)
     values = networks.apply_value(params, batch.observation)
-    return losses.ppo_loss(
-        dist_params, values, batch, networks.distribution, key,
-        clip_epsilon=config.clip_epsilon,
-        clip_value_loss=config.clip_value_loss,
-        entropy_cost=config.entropy_cost, value_cost=config.value_cost,
-        normalize_advantages=config.normalize_advantages)
+    return losses.ppo_loss(dist_params, values, batch, networks.distribution,
+                           key, **loss_options(config))
 
-  def sgd_step(carry, minibatch_and_key):
-    params, opt_state = carry
-    minibatch, key = minibatch_and_key
-    grads, metrics = jax.grad(loss_fn, has_aux=True)(params, minibatch, key)
-    metrics['grad_norm'] = optax.tree.norm(grads)  # Before clipping.
-    updates, opt_state = optimizer.update(grads, opt_state, params)
-    return (optax.apply_updates(params, updates), opt_state), metrics
+  sgd_step = make_sgd_step(loss_fn, optimizer)
 
   def epoch(carry, key, batch):
     permutation_key, loss_key = jax.random.split(key)
