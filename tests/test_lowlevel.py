@@ -300,11 +300,6 @@ def test_eval_lowlevel_reports_means_and_errors(tiny_run):
   assert mean > 0 and np.isfinite(se)
 
 
-_SHIPPED = os.path.join(lowlevel.WEIGHTS_DIR, 'position', 'config.json')
-
-
-@pytest.mark.skipif(not os.path.exists(_SHIPPED),
-                    reason='no shipped position controller yet')
 def test_shipped_position_controller_walks_to_targets():
   from runners import eval_lowlevel  # pylint: disable=g-import-not-at-top
   results = eval_lowlevel.evaluate(eval_lowlevel.EvalArgs(episodes=5))
