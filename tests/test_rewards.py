@@ -22,9 +22,12 @@ def test_reward_functions_by_hand():
   # Command 0.5 m/s along x, moving 0.25 m/s along x: 5 * 0.125 / 0.25 = 2.5.
   assert rewards.velocity_tracking(5.0, [0.25, 0.0], [0.5, 0.0]) == (
       pytest.approx(2.5))
-  # Faster than commanded saturates at the scale.
-  assert rewards.velocity_tracking(5.0, [2.0, 0.0], [0.5, 0.0]) == (
+  # Exactly the commanded speed pays the full scale.
+  assert rewards.velocity_tracking(5.0, [0.5, 0.0], [0.5, 0.0]) == (
       pytest.approx(5.0))
+  # 1.5x too fast: r = 0.75 / 0.5 = 1.5, pays 5 * (2 - 1.5) = 2.5.
+  assert rewards.velocity_tracking(5.0, [0.75, 0.0], [0.5, 0.0]) == (
+      pytest.approx(2.5))
   # Zero command: standing still pays fully, 0.25 m/s pays half.
   assert rewards.velocity_tracking(5.0, [0.0, 0.0], [0.0, 0.0]) == 5.0
   assert rewards.velocity_tracking(5.0, [0.25, 0.0], [0.0, 0.0]) == (

@@ -20,11 +20,15 @@ def planar_distance(a_xy, b_xy):
 
 
 def velocity_tracking(scale, velocity_xy, command_xy, min_speed=0.05):
-  """The velocity paradigm's `scale * clamp(v . c_hat / |c|, max=1)`.
+  """Velocity tracking: `scale * min(r, 2 - r)`, r = v . c / |c|^2.
 
-  For a unit-speed command this is the paper's `5 * clamp(v . cmd, max=1)`;
-  dividing by the commanded speed makes slower commands reachable. A command
-  slower than `min_speed` (m/s) means "stand still" and pays
+  r is the speed along the command relative to the commanded speed. Up to
+  r = 1 this is the paper's `5 * clamp(v . cmd, max=1)` (for a 1 m/s
+  command; dividing by |c| makes slower commands reachable). The paper's
+  clamp pays the same for any overshoot, and a controller trained on it ran
+  1.5x faster than commanded (measured: mean speed error 47%), so beyond
+  r = 1 the reward falls off again (a tent peaking at the commanded speed).
+  A command slower than `min_speed` (m/s) means "stand still" and pays
   `scale * (1 - min(|v| / 0.5, 1))` instead.
 
   Args:
@@ -37,7 +41,8 @@ def velocity_tracking(scale, velocity_xy, command_xy, min_speed=0.05):
   command_xy = np.asarray(command_xy, dtype=np.float64)
   speed = np.linalg.norm(command_xy, axis=-1)
   safe = np.maximum(speed, min_speed)
-  tracking = np.minimum(np.sum(velocity_xy * command_xy, -1) / safe**2, 1.0)
+  ratio = np.sum(velocity_xy * command_xy, -1) / safe**2
+  tracking = np.minimum(ratio, 2.0 - ratio)
   still = 1.0 - np.minimum(np.linalg.norm(velocity_xy, axis=-1) / 0.5, 1.0)
   return scale * np.where(speed >= min_speed, tracking, still)
 
