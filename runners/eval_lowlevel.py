@@ -6,8 +6,10 @@
 Position: `walk_to_target` with a fixed target (not redrawn when reached):
 success rate (reached within `reach_radius`), seconds to reach, final
 distance, fall rate. Velocity: `walk_velocity`: velocity cosine, relative
-speed error, speed while told to stand, fall rate. Means with standard errors
-over episodes; the episode seeds are `seed, seed + 1, ...`.
+speed error, speed while told to stand (transients after a redraw included),
+fall rate; then as many 5 s episodes that command zero from the start, for
+the drift of a standing ant. Means with standard errors over episodes; the
+episode seeds are `seed, seed + 1, ...`.
 """
 import dataclasses
 import json
@@ -33,6 +35,42 @@ class EvalArgs:
   """Seed of the first episode's environment."""
   time_limit: float = 10.0
   """Episode length (s)."""
+
+
+def _mean_and_error(rows):
+  out = {}
+  for name in rows[0]:
+    values = np.array([r[name] for r in rows], np.float64)
+    values = values[np.isfinite(values)]
+    mean = float(values.mean()) if len(values) else float('nan')
+    se = (float(values.std(ddof=1) / np.sqrt(len(values)))
+          if len(values) > 1 else float('nan'))
+    out[name] = (mean, se)
+  return out
+
+
+def stand_still(controller, args: EvalArgs, seconds: float = 5.0) -> dict:
+  """Zero command from the first step: the ant's mean planar speed over the
+  last half of the episode and how far its torso drifted (m)."""
+  import coop_suite  # pylint: disable=g-import-not-at-top
+  rows = []
+  for episode in range(args.episodes):
+    env = coop_suite.load('walk_velocity', 1, seed=args.seed + episode,
+                          time_limit=seconds, p_stand=1.0)  # Zero only.
+    timestep = env.reset()
+    start = env.task.walker.torso_position(env.physics)[:2].copy()
+    speeds = []
+    while not timestep.last():
+      timestep = env.step(controller.batch(timestep.observation))
+      speeds.append(np.linalg.norm(
+          env.task.walker.world_velocity(env.physics)[:2]))
+    drift = np.linalg.norm(
+        env.task.walker.torso_position(env.physics)[:2] - start)
+    rows.append({'stand_speed': float(np.mean(speeds[len(speeds) // 2:])),
+                 'stand_drift': float(drift),
+                 'stand_fall': float(env.episode_metrics()['failure'])})
+    env.close()
+  return _mean_and_error(rows)
 
 
 def evaluate(args: EvalArgs) -> dict:
@@ -66,14 +104,9 @@ def evaluate(args: EvalArgs) -> dict:
         row[name] = metrics.get(name, np.nan)
     rows.append(row)
     env.close()
-  out = {}
-  for name in rows[0]:
-    values = np.array([r[name] for r in rows], np.float64)
-    values = values[np.isfinite(values)]
-    mean = float(values.mean()) if len(values) else float('nan')
-    se = (float(values.std(ddof=1) / np.sqrt(len(values)))
-          if len(values) > 1 else float('nan'))
-    out[name] = (mean, se)
+  out = _mean_and_error(rows)
+  if args.paradigm == 'velocity':
+    out.update(stand_still(controller, args))
   return out
 
 

@@ -245,7 +245,8 @@ def train(args: Args) -> dict[str, Any]:
   if resuming:
     counters = run_dir.restore_checkpoint(learner, args.logdir)
   if args.export_only:
-    export(args, learner, info, counters)
+    export(args, learner, info, counters,
+           summary=run_dir.logged_row(args.logdir, counters['update']))
     return counters
 
   names = EPISODE_METRICS[args.paradigm]

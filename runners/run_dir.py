@@ -63,6 +63,19 @@ def _missing(value):
   return value is None or (isinstance(value, float) and math.isnan(value))
 
 
+def logged_row(logdir, update):
+  """The metrics.csv row of `update` as {column: float} (empty cells left
+  out), or {} when there is none: what an export from a checkpoint reports."""
+  path = os.path.join(logdir, 'metrics.csv')
+  if not os.path.exists(path):
+    return {}
+  with open(path, newline='') as f:
+    for row in csv.DictReader(f):
+      if int(row['update']) == update:
+        return {k: float(v) for k, v in row.items() if v != ''}
+  return {}
+
+
 class MetricsLog:
   """metrics.csv (+ TensorBoard events) with a fixed column list.
 

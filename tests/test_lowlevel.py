@@ -138,6 +138,25 @@ def test_pretrain_writes_metrics_checkpoints_and_resumes(tiny_run):
                               *TINY, '--resume', '--learning-rate', '1e-3'])
 
 
+def test_export_only_writes_the_newest_checkpoint_with_its_metrics(
+    tiny_run, tmp_path):
+  logdir = tiny_run[0]
+  pretrain_locomotion.main(['--paradigm', 'position', '--logdir', logdir,
+                            *TINY, '--total-env-steps', '192', '--export-only',
+                            '--export-dir', str(tmp_path)])
+  with open(tmp_path / 'config.json') as f:
+    training = json.load(f)['training']
+  assert training['update'] == 3 and training['env_steps'] == 192
+  assert training['final_metrics']['env_steps'] == 192
+  assert np.isfinite(training['final_metrics']['total_loss'])
+  exported = lowlevel.load('position', str(tmp_path))
+  shipped_next = lowlevel.load('position', os.path.join(logdir, 'controller'))
+  observation = coop_suite.load('walk_to_target', 1, seed=0).reset(
+      ).observation[0]
+  np.testing.assert_allclose(exported(observation), shipped_next(observation),
+                             rtol=1e-5, atol=1e-6)
+
+
 # --- Controller -------------------------------------------------------------------
 
 
@@ -305,3 +324,14 @@ def test_shipped_position_controller_walks_to_targets():
   results = eval_lowlevel.evaluate(eval_lowlevel.EvalArgs(episodes=5))
   assert results['fall'][0] == 0.0
   assert results['success'][0] >= 0.8, results
+
+
+def test_shipped_velocity_controller_tracks_commands():
+  from runners import eval_lowlevel  # pylint: disable=g-import-not-at-top
+  results = eval_lowlevel.evaluate(eval_lowlevel.EvalArgs(
+      paradigm='velocity', episodes=3, time_limit=10.0))
+  assert results['fall'][0] == 0.0
+  assert results['velocity_cosine'][0] >= 0.85, results
+  assert results['speed_error'][0] <= 0.3, results
+  # A zero command: it stays within a few centimetres and does not fall.
+  assert results['stand_drift'][0] <= 0.3 and results['stand_fall'][0] == 0

@@ -166,6 +166,23 @@ def test_walk_velocity_reward_terms():
       sum(metrics[k] for k in metrics if k.startswith("reward/")), rel=1e-5)
 
 
+def test_walk_velocity_tracking_figures_cover_only_the_steps_they_apply_to():
+  env = coop_suite.load("walk_velocity", seed=3)
+  env.reset()
+  env.task.set_command(env.physics, [0.5, 0.0])
+  env.step(ZERO)
+  moving = env.episode_metrics()
+  assert "mean_speed_still" not in moving  # No zero command yet.
+  assert -1.0 <= moving["velocity_cosine"] <= 1.0
+  assert moving["speed_error"] >= 0.0
+  env.task.set_command(env.physics, [0.0, 0.0])
+  env.step(ZERO)
+  both = env.episode_metrics()
+  speed = np.linalg.norm(env.task.walker.world_velocity(env.physics)[:2])
+  assert both["mean_speed_still"] == pytest.approx(speed)
+  assert both["velocity_cosine"] == moving["velocity_cosine"]
+
+
 @pytest.mark.parametrize("time_limit,steps", [(0.5, 10), (10.0, 200)])
 def test_time_limit_is_a_truncation(time_limit, steps):
   env = coop_suite.load("walk_velocity", seed=0, time_limit=time_limit)

@@ -210,17 +210,20 @@ class WalkVelocity(_Locomotion):
         self._config.velocity_scale, velocity, self._command)])}
 
   def _progress(self, physics):
-    """Tracking quality over the episode (skipping 1 s after each redraw
-    would be kinder; these figures include the transients)."""
+    """Tracking quality over the episode, transients after each redraw
+    included. A figure is left out when the episode had no step it applies
+    to (no zero command: no `mean_speed_still`), so that averages over
+    episodes are not pulled towards a made-up 0."""
     if not self._tracking:
-      return {"velocity_cosine": 0.0, "speed_error": 0.0}
+      return {}
     data = np.array(self._tracking)
     velocity, command = data[:, :2], data[:, 2:]
     speed = np.linalg.norm(command, axis=1)
     moving = speed > 0.05
     achieved = np.linalg.norm(velocity, axis=1)
-    out = {"mean_speed_still": float(np.mean(achieved[~moving]))
-           if np.any(~moving) else 0.0}
+    out = {}
+    if np.any(~moving):
+      out["mean_speed_still"] = float(np.mean(achieved[~moving]))
     if np.any(moving):
       cos = np.sum(velocity[moving] * command[moving], 1) / (
           np.maximum(achieved[moving], 1e-6) * speed[moving])
