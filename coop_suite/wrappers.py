@@ -12,11 +12,12 @@ We do not use the generic dm_env bridge (Shimmy's
 for a benchmark, each fixed here:
 
 * Termination versus truncation. dm_env marks the task ending an episode
-  (success, failure, physics divergence) with discount 0, and a time-limit
-  end with discount 1 (`coop_suite.is_truncation`). Gymnasium's
-  `terminated` means "do not bootstrap", `truncated` means "bootstrap from
-  the last observation". Shimmy maps discount 0 to truncation, which is
-  backwards and makes value targets wrong at every success.
+  (failure, physics divergence, success with `end_on_success`) with
+  discount 0, and a time-limit end with discount 1
+  (`coop_suite.is_truncation`). Gymnasium's `terminated` means "do not
+  bootstrap", `truncated` means "bootstrap from the last observation".
+  Shimmy maps discount 0 to truncation, which is backwards and makes value
+  targets wrong at every terminal step.
 * Seeding. `reset(seed=s)` reseeds `env.random_state`, which draws every
   episode's randomisation, so the same seed gives the same episode and the
   same rollout under the same actions. Shimmy documents that seeding does
@@ -172,9 +173,9 @@ class ParallelEnv(pettingzoo.ParallelEnv):
     """Steps every agent; returns (obs, rewards, terminations, truncations,
     infos), each a dict keyed by agent id.
 
-    `terminations` are True when the task ended the episode (success,
-    failure, physics divergence: dm_env discount 0), `truncations` only at
-    the time limit. At the last step every agent's info holds
+    `terminations` are True when the task ended the episode (failure,
+    physics divergence, success with `end_on_success`: dm_env discount 0),
+    `truncations` only at the time limit. At the last step every agent's info holds
     'episode_metrics' (`CoopEnvironment.episode_metrics()`), and `agents`
     becomes empty: call `reset()` before stepping again.
 

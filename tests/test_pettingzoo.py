@@ -111,19 +111,37 @@ def test_different_seeds_different_episodes():
                             b["ant_0"]["extero/target"])
 
 
-def test_hand_made_success_is_termination_not_truncation():
-  env = coop_suite.pettingzoo_env("transport", 3, time_limit=0.5)
-  env.reset(seed=0)
+def _place_cylinder_on_target(env):
   task, physics = env.env.task, env.env.physics
   task.cylinder.set_pose(physics,
                          position=[*task.arena.target_position, 0.25])
   task.cylinder.set_velocity(physics, velocity=np.zeros(3),
                              angular_velocity=np.zeros(3))
+
+
+def test_hand_made_success_is_termination_not_truncation():
+  env = coop_suite.pettingzoo_env("transport", 3, time_limit=0.5,
+                                  end_on_success=True)
+  env.reset(seed=0)
+  _place_cylinder_on_target(env)
   _, rewards, terminations, truncations, infos = env.step(_zeros(env))
   assert all(terminations.values()) and not any(truncations.values())
   assert min(rewards.values()) > 50.0  # Bonus plus the shaping terms.
   assert all(info["episode_metrics"]["success"] for info in infos.values())
   assert env.agents == []
+
+
+def test_success_runs_on_to_the_time_limit_by_default():
+  env = coop_suite.pettingzoo_env("transport", 3, time_limit=0.5)
+  env.reset(seed=0)
+  _place_cylinder_on_target(env)
+  _, rewards, terminations, truncations, _ = env.step(_zeros(env))
+  assert not any(terminations.values()) and not any(truncations.values())
+  assert min(rewards.values()) > 50.0
+  for _ in range(9):
+    _, _, terminations, truncations, infos = env.step(_zeros(env))
+  assert all(truncations.values()) and not any(terminations.values())
+  assert infos["ant_0"]["episode_metrics"]["success"]
 
 
 def test_time_limit_is_truncation_not_termination():

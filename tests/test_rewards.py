@@ -34,15 +34,18 @@ def test_reward_functions_by_hand():
       pytest.approx(2.5))
 
 
-def test_transport_success_pays_everyone_and_ends():
-  env = coop_suite.load("transport", 3, seed=1)
+@pytest.mark.parametrize("end_on_success", [False, True])
+def test_transport_success_pays_everyone_once(end_on_success):
+  env = coop_suite.load("transport", 3, seed=1, end_on_success=end_on_success)
   env.reset()
   task, physics = env.task, env.physics
   target = task.arena.target_position
   layouts.place_prop(task.cylinder, physics, [*target, task.cylinder.height / 2])
   timestep = env.step(_zeros(env))
-  assert timestep.last()
-  assert float(timestep.discount) == 0.0
+  # Success ends the episode only on request; by default the shaping terms
+  # keep paying until the time limit (see TaskConfig.end_on_success).
+  assert timestep.last() == end_on_success
+  assert float(timestep.discount) == (0.0 if end_on_success else 1.0)
   cylinder = task.cylinder.position(physics)[:2]
   for i, reward in enumerate(timestep.reward):
     agent = task.walkers[i].torso_position(physics)[:2]
@@ -53,6 +56,14 @@ def test_transport_success_pays_everyone_and_ends():
   metrics = env.episode_metrics()
   assert metrics["success"] is True
   assert metrics["reward/success"] == 50.0
+  if not end_on_success:
+    # The bonus is paid once; success stays counted when the cylinder leaves.
+    layouts.place_prop(task.cylinder, physics,
+                       [*(target + 3.0), task.cylinder.height / 2])
+    timestep = env.step(_zeros(env))
+    assert timestep.mid() and all(r < 50.0 for r in timestep.reward)
+    assert env.episode_metrics()["success"] is True
+    assert env.episode_metrics()["reward/success"] == 50.0
 
 
 def test_transport_moving_cylinder_is_not_resting():
@@ -67,8 +78,10 @@ def test_transport_moving_cylinder_is_not_resting():
   assert not env.episode_metrics()["success"]
 
 
-def test_corridor_crossing_pays_all_once_and_success_when_all_crossed():
-  env = coop_suite.load("corridor", 2, seed=0)
+@pytest.mark.parametrize("end_on_success", [False, True])
+def test_corridor_crossing_pays_all_once_and_success_when_all_crossed(
+    end_on_success):
+  env = coop_suite.load("corridor", 2, seed=0, end_on_success=end_on_success)
   env.reset()
   task, physics = env.task, env.physics
   rng = np.random.RandomState(0)
@@ -82,21 +95,28 @@ def test_corridor_crossing_pays_all_once_and_success_when_all_crossed():
   assert env.episode_metrics()["crossed"] == 1
   layouts.place(task.walkers[1], physics, [finish + 1.0, 3.0], 0.0, rng)
   last = env.step(_zeros(env))
-  assert last.last() and float(last.discount) == 0.0
+  assert last.last() == end_on_success
+  assert float(last.discount) == (0.0 if end_on_success else 1.0)
   assert all(r > 50.0 for r in last.reward)
   assert env.episode_metrics()["success"] is True
 
 
-def test_ravine_joint_crossing_pays_pushers_too():
+def test_ravine_joint_crossing_pays_pushers_too_once():
   env = coop_suite.load("ravine", 2, seed=0)
   env.reset()
   task, physics = env.task, env.physics
+  rng = np.random.RandomState(0)
   layouts.place(task.walkers[0], physics, [task.arena.finish_x + 0.5, 0.0],
-                0.0, np.random.RandomState(0))
+                0.0, rng)
   timestep = env.step(_zeros(env))
-  assert timestep.last() and float(timestep.discount) == 0.0
+  assert timestep.mid() and float(timestep.discount) == 1.0
   assert len(timestep.reward) == 4
   assert all(r >= 50.0 for r in timestep.reward)
+  # Back before the line: no second bonus, and the success still counts.
+  layouts.place(task.walkers[0], physics, [task.arena.finish_x - 1.0, 0.0],
+                0.0, rng)
+  timestep = env.step(_zeros(env))
+  assert all(r < 50.0 for r in timestep.reward)
   assert env.episode_metrics()["success"] is True
 
 

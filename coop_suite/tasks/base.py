@@ -11,7 +11,11 @@ that only overrides the hooks below:
 * `_initialize_layout(physics, random_state)`: starting poses.
 * `_reward_terms(physics)`: dict of term -> per-agent array [n_agents].
 * `_update_status(physics)`: after each control step; sets `self._success`
-  and `self._failure` (both end the episode with discount 0).
+  and `self._failure`. Success is sticky (once reached, the episode counts
+  as a success) and `self._success_event` is True on the step it is
+  reached, when tasks pay their success bonus. Failure ends the episode with
+  discount 0; success does too only with `end_on_success` (see
+  `TaskConfig`).
 * `_progress(physics)`: task-specific figures for `episode_metrics`.
 * `_task_state(physics)`: task objects' part of the global state.
 """
@@ -52,6 +56,14 @@ class TaskConfig:
   """Distance between height samples (m)."""
   memory_mb_per_agent: float = 1.0
   """MuJoCo constraint memory per agent (MiB), on top of 4 MiB."""
+  end_on_success: bool = False
+  """Whether success ends the episode (discount 0). Off by default: the
+  paper's shaping terms pay every step (e.g. 10 / (1 + d) near the target),
+  so an episode cut short at success forfeits more shaping reward than the
+  one-off success bonus pays, and a learner is taught to linger near the
+  goal without finishing. Running on to the time limit, the shaping terms
+  keep paying most for staying at the goal. Success is counted, and its bonus
+  paid, the first time it is reached either way."""
 
 
 class CoopTask(composer.Task):
@@ -193,7 +205,10 @@ class CoopTask(composer.Task):
 
   def after_step(self, physics, random_state):
     self._steps += 1
+    succeeded_before = self._success
     self._update_status(physics)
+    self._success = bool(self._success or succeeded_before)
+    self._success_event = self._success and not succeeded_before
 
   def get_reward(self, physics):
     terms = self._reward_terms(physics)
@@ -206,11 +221,15 @@ class CoopTask(composer.Task):
     return list(total.astype(np.float32))
 
   def get_discount(self, physics):
-    ended = self._success or self._failure
-    return np.asarray(0.0 if ended else 1.0, dtype=np.float32)
+    return np.asarray(0.0 if self._ended() else 1.0, dtype=np.float32)
 
   def should_terminate_episode(self, physics):
-    return bool(self._success or self._failure)
+    return self._ended()
+
+  def _ended(self):
+    """Whether the task ends the episode now (a termination, discount 0)."""
+    return bool(self._failure
+                or (self._success and self._config.end_on_success))
 
   def observation_batch(self, physics, layout):
     """Observations for `layout` ([(name, agent index), ...] per agent).
@@ -293,6 +312,7 @@ class CoopTask(composer.Task):
 
   def _reset_bookkeeping(self):
     self._success = False
+    self._success_event = False
     self._failure = False
     self._steps = 0
     self._return = np.zeros(self.n_agents)

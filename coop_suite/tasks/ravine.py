@@ -10,8 +10,8 @@ Ravine Bridging"), selected with `stage`:
   5 / (1 + |stone_y - y of the crosser nearest the ravine|).
 * 'crossers': only the crossers act, the stone lies at a random place;
   crossers are paid 5 / (1 + |finish_x - x|) and -20 once if they fall in.
-* 'joint': everybody acts; both shaping terms stay on and a crossing pays
-  +50 to all agents and ends the episode.
+* 'joint': everybody acts; both shaping terms stay on and the first crossing
+  pays +50 to all agents (and ends the episode with `end_on_success`).
 """
 
 import dataclasses
@@ -194,7 +194,8 @@ class Ravine(base.CoopTask):
           cfg.destination_scale, np.abs(self._arena.finish_x - x)), 0.0)
       terms["fall"] = np.where(self._new_falls, cfg.fall_penalty, 0.0)
     if self.stage == "joint":
-      terms["success"] = np.full(n, cfg.success_bonus if self._success else 0.)
+      terms["success"] = np.full(
+          n, cfg.success_bonus if self._success_event else 0.0)
     return terms
 
   def _progress(self, physics):

@@ -106,7 +106,7 @@ class Transport(base.CoopTask):
         "agent_target": rewards.inverse_distance(cfg.agent_target_scale,
                                                  agent_target),
         "success": np.full(self.n_agents,
-                           cfg.success_bonus if self._success else 0.0),
+                           cfg.success_bonus if self._success_event else 0.0),
     }
 
   def _progress(self, physics):
