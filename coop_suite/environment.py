@@ -17,6 +17,11 @@ These things differ from a plain `composer.Environment`, each for a reason:
   buffering, no noise): composer's per-observable bookkeeping otherwise costs
   more than the physics. Any non-default observable restores composer's own
   updater, so its semantics are always preserved.
+* `step(action, observe=False)` skips building the observation of a step
+  that does not end the episode, for callers that read only part of it from
+  `task.features` (`CommandWrapper` runs the lower layer on proprioception
+  for nine control steps out of ten and needs the exteroception only at the
+  end of a command period).
 """
 
 from absl import logging
@@ -118,12 +123,20 @@ class CoopEnvironment(composer.Environment):
     self._physics_diverged = False
     return super().reset()
 
-  def step(self, action):
+  def step(self, action, observe=True):
+    """Steps every agent; `action` is [n_agents, 8] (or a list of [8]).
+
+    Args:
+      action: the agents' actions (see `validate_action`).
+      observe: False leaves the observation of a MID step out (None); the
+        LAST step of an episode always has it. Only for callers that read
+        what they need from `task.features(physics, groups)`.
+    """
     if self._reset_next_step:
       return self.reset()
     action = self.validate_action(action)
     if self._can_fuse_substeps():
-      timestep = self._fused_step(action)
+      timestep = self._fused_step(action, observe)
     else:
       timestep = super().step(action)
     if not isinstance(timestep.reward, list):
@@ -145,7 +158,7 @@ class CoopEnvironment(composer.Environment):
             and composer_env._callable_is_trivial(self._task.before_substep)
             and composer_env._callable_is_trivial(self._task.after_substep))
 
-  def _fused_step(self, action):
+  def _fused_step(self, action, observe=True):
     """composer.Environment.step with the substeps in one physics call."""
     self._hooks.before_step(self._physics_proxy, action, self._random_state)
     try:
@@ -168,7 +181,8 @@ class CoopEnvironment(composer.Environment):
           self._time_limit - 0.5 * self._physics.timestep())
       terminating = (self._task.should_terminate_episode(self._physics_proxy)
                      or time_up)
-    observation = self._observation_updater.get_observation()
+    observation = (self._observation_updater.get_observation()
+                   if observe or terminating else None)
     if terminating:
       self._reset_next_step = True
       return dm_env.TimeStep(dm_env.StepType.LAST, reward, discount,

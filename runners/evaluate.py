@@ -186,8 +186,8 @@ class _Filming:
     self._film()
     return timestep
 
-  def step(self, action):
-    timestep = self._env.step(action)
+  def step(self, action, observe=True):
+    timestep = self._env.step(action, observe=observe)
     self._film()
     if timestep.last() and not self.done:
       self.done = True

@@ -246,6 +246,59 @@ def test_command_wrapper_specs_and_episode_boundaries(controller):
     lowlevel.CommandWrapper(env.env, controller, command_period=0.07)
 
 
+def test_step_without_observing_skips_mid_observations_only():
+  env = coop_suite.load('transport', 2, seed=0, time_limit=0.1)  # 2 steps.
+  env.reset()
+  mid = env.step(np.zeros((2, 8)), observe=False)
+  assert mid.mid() and mid.observation is None
+  assert len(mid.reward) == 2
+  last = env.step(np.zeros((2, 8)), observe=False)
+  assert last.last()  # The episode's last observation is always there.
+  assert set(last.observation[0]) == set(env.observation_spec()[0])
+
+
+@pytest.mark.parametrize('task, n_agents, paradigm', [
+    ('transport', 3, 'position'), ('walk_velocity', 1, 'velocity')])
+def test_command_wrapper_matches_stepping_on_full_observations(
+    task, n_agents, paradigm):
+  """The wrapper's fast path (proprioception read from the task, the
+  exteroception skipped between commands) changes no number."""
+  controller = lowlevel.load(paradigm)
+  wrapped = lowlevel.CommandWrapper(
+      coop_suite.load(task, n_agents, seed=5, time_limit=1.2), controller)
+  reference = coop_suite.load(task, n_agents, seed=5, time_limit=1.2)
+  rng = np.random.default_rng(0)
+  timestep, expected = wrapped.reset(), reference.reset()
+  while not timestep.last():  # 2.4 command periods: ends mid-period.
+    commands = rng.uniform(-1, 1, (n_agents, 2))
+    timestep = wrapped.step(commands)
+    world = wrapped.world_commands  # This period's commands, world frame.
+    total = np.zeros(n_agents)
+    for _ in range(wrapped.low_level_steps):
+      observations = expected.observation
+      torso = reference.physics.data.xpos[reference.task._torso_ids]  # pylint: disable=protected-access
+      yaw = [w.heading(reference.physics) for w in reference.task.walkers]
+      cos, sin = np.cos(yaw), np.sin(yaw)
+      delta = world - torso[:, :2] if paradigm == 'position' else world
+      command = np.stack([cos * delta[:, 0] + sin * delta[:, 1],
+                          cos * delta[:, 1] - sin * delta[:, 0]], axis=1)
+      inputs = {k: np.stack([o[k] for o in observations])
+                for k in controller.observation_keys
+                if k != controller.command_key}
+      inputs[controller.command_key] = command
+      expected = reference.step(controller.batch(inputs))
+      total += np.asarray(expected.reward, np.float64)
+      if expected.last():
+        break
+    np.testing.assert_allclose(timestep.reward, total, rtol=1e-6)
+    for got, want in zip(timestep.observation, expected.observation):
+      assert got.keys() == want.keys()
+      for key in got:
+        np.testing.assert_allclose(got[key], want[key], rtol=1e-6,
+                                   atol=1e-9, err_msg=key)
+  assert expected.last()
+
+
 def test_command_wrapper_feeds_heading_frame_commands(controller):
   recorder = _Recorder(controller)
   env = lowlevel.CommandWrapper(coop_suite.load('transport', 2, seed=1),

@@ -70,8 +70,10 @@ class CommandWrapper:
         for i in range(env.n_agents)]
     keys = controller.observation_keys
     self._proprio_keys = [k for k in keys if k != controller.command_key]
+    # Feature groups the controller reads besides its command ('proprio').
+    self._input_groups = tuple(sorted({k.split('/')[0]
+                                       for k in self._proprio_keys}))
     self._world_commands = np.zeros((env.n_agents, 2))
-    self._observation = None
     self._reset_next_step = True
 
   # --- Properties and passthroughs ------------------------------------------
@@ -135,7 +137,6 @@ class CommandWrapper:
 
   def reset(self) -> dm_env.TimeStep:
     timestep = self._env.reset()
-    self._observation = timestep.observation
     self._world_commands = self._frames().position[:, :2].copy() if (
         self._paradigm == 'position') else np.zeros((self.n_agents, 2))
     self._reset_next_step = False
@@ -155,10 +156,12 @@ class CommandWrapper:
     total = np.zeros(self.n_agents)
     discount = 1.0
     timestep = None
-    for _ in range(self._low_level_steps):
+    for step in range(self._low_level_steps):
       actions = self._controller.batch(self._controller_inputs())
-      timestep = self._env.step(actions)
-      self._observation = timestep.observation
+      # Only the period's last observation is returned: the steps before it
+      # skip the exteroception (the environment still observes a LAST step).
+      timestep = self._env.step(
+          actions, observe=step == self._low_level_steps - 1)
       total += np.asarray(timestep.reward, np.float64)
       discount *= float(timestep.discount)
       if timestep.last():
@@ -178,15 +181,16 @@ class CommandWrapper:
                                                self._env.physics)
 
   def _controller_inputs(self):
-    """Stacked controller observations: proprio from the env + command."""
+    """Controller observations [n_agents, k] per key: proprioception as the
+    task computes it for all agents at once, plus the command."""
     frames = self._frames()
     if self._paradigm == 'position':
       command = frames.to_heading_frame(self._world_commands)
     else:
       command = frames_lib.rotate_to_heading(self._world_commands, frames.cos,
                                              frames.sin)
-    inputs = {k: np.stack([o[k] for o in self._observation])
-              for k in self._proprio_keys}
+    features = self._env.task.features(self._env.physics, self._input_groups)
+    inputs = {k: features[k] for k in self._proprio_keys}
     inputs[self._controller.command_key] = command
     return inputs
 

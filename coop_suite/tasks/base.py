@@ -37,6 +37,9 @@ SPECIES_COLOURS = {
     "crosser": (0.85, 0.55, 0.25, 1.0),
 }
 
+FEATURE_GROUPS = ("proprio", "extero", "command")
+"""Observation prefixes, each computed by `CoopTask.features` on demand."""
+
 
 @dataclasses.dataclass(frozen=True)
 class TaskConfig:
@@ -101,6 +104,9 @@ class CoopTask(composer.Task):
                                          config.height_spacing)
     self._cache_key = None
     self._cache = None
+    self._cached_groups = set()
+    self._checked_groups = set()
+    self._frames = None
     self._per_state_cache = {}
     self._state_version = 0
     self._reset_bookkeeping()
@@ -241,37 +247,65 @@ class CoopTask(composer.Task):
     return [{name: features[name][index] for name, index in agent}
             for agent in layout]
 
-  def features(self, physics):
-    """Every observation of every agent: 'group/name' -> [n_agents, dim].
+  def features(self, physics, groups=FEATURE_GROUPS):
+    """Observations of every agent: 'group/name' -> [n_agents, dim].
 
-    Computed once per physics state and cached, since each agent's
-    observables read from it.
+    Args:
+      physics: the task's physics.
+      groups: the prefixes to compute ('proprio', 'extero', 'command'); the
+        returned dict may hold other groups computed earlier for the same
+        state. The lower layer reads only 'proprio' at each control step,
+        while the exteroception (ray casts, nearest teammates) is needed only
+        when the upper layer acts, so `CommandWrapper` asks for less.
+
+    Each group is computed at most once per physics state and cached, since
+    every agent's observables read from it.
     """
     key = (self._state_version, physics.data.time)
     if key != self._cache_key:
-      frames = extero.AgentFrames.from_walkers(self._walkers, physics)
-      out = {f"proprio/{k}": v for k, v in ant_lib.proprioception(
-          self._walkers, physics, self._last_actions).items()}
-      groups = [("extero", self._exteroception(physics, frames),
-                 self.EXTERO_FEATURES),
-                ("command", self._commands(physics, frames),
-                 self.COMMAND_FEATURES)]
-      if self.SHARED_EXTERO:
-        groups.append(("extero", self._shared_exteroception(physics, frames),
-                       SHARED_EXTERO_FEATURES))
-      for group, values, names in groups:
-        if self._cache_key is None and set(values) != set(names):
-          raise RuntimeError(f"{type(self).__name__} computed {group} "
-                             f"features {sorted(values)}, declared {names}.")
-        for name, value in values.items():
-          out[f"{group}/{name}"] = value
-      if self._cache_key is None:  # Check shapes once, on the first state.
-        for name, value in out.items():
-          if np.ndim(value) != 2 or len(value) != self.n_agents:
-            raise RuntimeError(f"Feature {name} has shape {np.shape(value)}; "
-                               f"expected [{self.n_agents}, dim].")
-      self._cache_key, self._cache = key, out
+      self._cache_key, self._cache = key, {}
+      self._cached_groups = set()
+      self._frames = extero.AgentFrames.from_walkers(self._walkers, physics)
+    for group in groups:
+      if group not in self._cached_groups:
+        values = self._compute_group(group, physics, self._frames)
+        if group not in self._checked_groups:
+          self._check_group(group, values)
+        self._cache.update(values)
+        self._cached_groups.add(group)
     return self._cache
+
+  def _compute_group(self, group, physics, frames):
+    """One group's features: 'group/name' -> [n_agents, dim]."""
+    if group == "proprio":
+      values = ant_lib.proprioception(self._walkers, physics,
+                                      self._last_actions)
+    elif group == "extero":
+      values = dict(self._exteroception(physics, frames))
+      if self.SHARED_EXTERO:
+        values.update(self._shared_exteroception(physics, frames))
+    elif group == "command":
+      values = self._commands(physics, frames)
+    else:
+      raise ValueError(f"Unknown feature group {group!r}; expected one of "
+                       f"{FEATURE_GROUPS}.")
+    return {f"{group}/{name}": value for name, value in values.items()}
+
+  def _check_group(self, group, values):
+    """Checks a group's names and shapes once, on its first computation."""
+    declared = {"proprio": ant_lib.PROPRIOCEPTION_KEYS,
+                "extero": self.EXTERO_FEATURES + (
+                    SHARED_EXTERO_FEATURES if self.SHARED_EXTERO else ()),
+                "command": self.COMMAND_FEATURES}[group]
+    names = {name.split("/", 1)[1] for name in values}
+    if names != set(declared):
+      raise RuntimeError(f"{type(self).__name__} computed {group} features "
+                         f"{sorted(names)}, declared {sorted(declared)}.")
+    for name, value in values.items():
+      if np.ndim(value) != 2 or len(value) != self.n_agents:
+        raise RuntimeError(f"Feature {name} has shape {np.shape(value)}; "
+                           f"expected [{self.n_agents}, dim].")
+    self._checked_groups.add(group)
 
   # --- Hooks for subclasses ---------------------------------------------------
 
