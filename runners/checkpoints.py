@@ -11,6 +11,10 @@ One checkpoint is one directory, `<logdir>/checkpoints/ckpt_<iteration>/`:
 It is written into a temporary sibling directory and renamed into place, so
 a crash leaves either the whole checkpoint or none; the newest `keep` are
 kept. `--resume` and `coop-eval` read the newest complete one.
+
+`<logdir>/checkpoints/best/` (with `--keep-best`) is a checkpoint of the same
+form holding the iteration whose episode window scored best (`save_best`);
+`coop-eval --checkpoint <logdir>/checkpoints/best` evaluates it.
 """
 import glob
 import json
@@ -20,6 +24,7 @@ from typing import Any, Mapping
 
 FORMAT = 1
 STATE_FILE = 'state.json'
+BEST = 'best'
 _PREFIX = 'ckpt_'
 
 
@@ -34,18 +39,9 @@ def list_checkpoints(logdir: str) -> list[str]:
                 .isdigit() and os.path.exists(os.path.join(p, STATE_FILE)))
 
 
-def save(logdir: str, learners: Mapping[str, Any], state: dict[str, Any],
-         keep: int) -> str:
-  """Writes a checkpoint atomically; returns its directory.
-
-  Args:
-    logdir: the run directory.
-    learners: {species name: HierarchyLearner}.
-    state: JSON-able dict with at least 'iteration' (counters, config...).
-    keep: newest checkpoints kept; older ones are deleted.
-  """
-  final = os.path.join(_directory(logdir),
-                       f'{_PREFIX}{int(state["iteration"]):08d}')
+def _write(final: str, learners: Mapping[str, Any], state: dict[str, Any]):
+  """Writes a checkpoint directory `final` atomically (temporary sibling,
+  then rename), replacing any earlier one of that name."""
   tmp = f'{final}.tmp-{os.getpid()}'
   shutil.rmtree(tmp, ignore_errors=True)
   os.makedirs(tmp)
@@ -58,10 +54,34 @@ def save(logdir: str, learners: Mapping[str, Any], state: dict[str, Any],
   if os.path.exists(final):  # The same iteration again after a resume.
     shutil.rmtree(final)
   os.replace(tmp, final)
+
+
+def save(logdir: str, learners: Mapping[str, Any], state: dict[str, Any],
+         keep: int) -> str:
+  """Writes a checkpoint atomically; returns its directory.
+
+  Args:
+    logdir: the run directory.
+    learners: {species name: HierarchyLearner}.
+    state: JSON-able dict with at least 'iteration' (counters, config...).
+    keep: newest checkpoints kept; older ones are deleted.
+  """
+  final = os.path.join(_directory(logdir),
+                       f'{_PREFIX}{int(state["iteration"]):08d}')
+  _write(final, learners, state)
   for old in list_checkpoints(logdir)[:-keep]:
     shutil.rmtree(old, ignore_errors=True)
   for stale in glob.glob(os.path.join(_directory(logdir), '*.tmp-*')):
     shutil.rmtree(stale, ignore_errors=True)  # Left by a crashed writer.
+  return final
+
+
+def save_best(logdir: str, learners: Mapping[str, Any],
+              state: dict[str, Any]) -> str:
+  """Writes `state` and the learners as `checkpoints/best/`, atomically,
+  replacing the previous best; returns its directory."""
+  final = os.path.join(_directory(logdir), BEST)
+  _write(final, learners, state)
   return final
 
 

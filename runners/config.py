@@ -28,8 +28,8 @@ HIERARCHY_FIELDS = (
 # Fields that may change when a run is resumed (the rest must match).
 RESUMABLE_CHANGES = ('actors', 'envs_per_actor', 'total_steps', 'logdir',
                      'ray_address', 'resume', 'checkpoint_every',
-                     'keep_checkpoints', 'max_actor_restarts', 'progress',
-                     'controller', 'window')
+                     'keep_checkpoints', 'keep_best', 'max_actor_restarts',
+                     'progress', 'controller', 'window')
 
 
 @dataclasses.dataclass(frozen=True)
@@ -76,6 +76,10 @@ class TrainArgs:
   """Write a checkpoint every this many iterations (and at the end)."""
   keep_checkpoints: int = 3
   """Checkpoints kept; older ones are deleted."""
+  keep_best: bool = True
+  """Also keep, in checkpoints/best/, the iteration whose full episode window
+  had the highest success rate (then return): PPO on these tasks can fall
+  back after a peak (docs/results.md)."""
   max_actor_restarts: int = 3
   """Times Ray restarts each dead actor process (-1: without limit)."""
   progress: bool = True

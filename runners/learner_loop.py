@@ -132,10 +132,12 @@ def _train(args, checkpoint, on_iteration):
   counters = {'iteration': 0, 'env_steps': 0, 'episodes': 0,
               'wall_time': 0.0, 'restarts': 0}
   window = metrics_lib.EpisodeWindow(keys, args.window, dt)
+  best_score = None  # (success, return) of the best full window so far.
   if checkpoint is not None:
     saved = checkpoints.restore(checkpoint, learners)
     counters.update({k: saved[k] for k in counters})
     window.restore(saved.get('window', []))
+    best_score = saved.get('best_score')
   state = {'args': args.to_dict(), 'agent_config': config_lib.json_safe(
       dataclasses.asdict(config)), 'species': [s.to_dict() for s in layout]}
   per_iteration = (args.num_actors * args.envs_per_actor
@@ -156,8 +158,8 @@ def _train(args, checkpoint, on_iteration):
   def save():
     return checkpoints.save(
         args.logdir, learners,
-        {**counters, **state, 'window': window.state()},
-        args.keep_checkpoints)
+        {**counters, **state, 'window': window.state(),
+         'best_score': best_score}, args.keep_checkpoints)
 
   pool = None
   try:
@@ -198,6 +200,13 @@ def _train(args, checkpoint, on_iteration):
                'restarts': counters['restarts']}
         log.write(row)
         progress.update(row, steps)
+        score = _window_score(row) if window.full else None
+        if args.keep_best and score and (best_score is None
+                                         or score > tuple(best_score)):
+          best_score = score
+          checkpoints.save_best(args.logdir, learners, {
+              **counters, **state, 'window': window.state(),
+              'best_score': best_score})
         if (counters['iteration'] % args.checkpoint_every == 0
             or counters['iteration'] == iterations or stop.requested):
           save()
@@ -215,6 +224,14 @@ def _train(args, checkpoint, on_iteration):
       pool.close()
   return {**row, 'iterations': iterations,
           'checkpoint': (checkpoints.list_checkpoints(args.logdir) or [''])[-1]}
+
+
+def _window_score(row):
+  """(success, return) means of the episode window, or None if undefined."""
+  score = (row.get('success'), row.get('return'))
+  if any(v is None or not np.isfinite(v) for v in score):
+    return None
+  return tuple(float(v) for v in score)
 
 
 def _make_pool(args, spec, config, iteration):

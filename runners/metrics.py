@@ -66,6 +66,11 @@ class EpisodeWindow:
   def restore(self, episodes: Iterable[dict[str, Any]]) -> None:
     self._episodes.extend(episodes)
 
+  @property
+  def full(self) -> bool:
+    """Whether the window holds `size` episodes (its means are comparable)."""
+    return len(self._episodes) == self._episodes.maxlen
+
   def summary(self) -> dict[str, float]:
     """{key: mean over the window} (NaN before any episode ended)."""
     out = {}

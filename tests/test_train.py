@@ -156,6 +156,28 @@ def test_checkpoints_keep_the_newest_and_resume_continues(controller, hrl_run,
       envs_lib.CONTROLLER_FILES)
 
 
+def test_best_checkpoint_holds_the_best_full_window(controller, tmp_path,
+                                                   capsys):
+  # Episodes of 0.8 s are 2 iterations: with a window of 2 episodes it is
+  # full from iteration 2 on (both copies have ended one episode).
+  logdir = str(tmp_path / 'best')
+  learner_loop.train(_args(logdir, controller, window=2,
+                           total_steps=6 * STEPS))
+  rows = _rows(logdir)[1:]
+  scores = [(float(r['success']), float(r['return'])) for r in rows]
+  winner = rows[scores.index(max(scores))]  # First of equal scores.
+  best = os.path.join(logdir, 'checkpoints', checkpoints.BEST)
+  state = checkpoints.read_state(best)
+  assert state['iteration'] == int(winner['update'])
+  assert tuple(state['best_score']) == max(scores)
+  assert checkpoints.list_checkpoints(logdir)[-1].endswith('ckpt_00000006')
+  # The newest checkpoint carries the score, so a resumed run continues it.
+  newest = checkpoints.read_state(checkpoints.resolve(logdir))
+  assert tuple(newest['best_score']) == max(scores)
+  evaluate.main(['--checkpoint', best, '--episodes', '1', '--envs', '1'])
+  assert 'success rate' in capsys.readouterr().out
+
+
 def test_missing_controller_says_how_to_make_one(tmp_path):
   with pytest.raises(FileNotFoundError, match='coop-pretrain-lowlevel'):
     envs_lib.read_controller('position', str(tmp_path))
