@@ -194,23 +194,33 @@ def ray_cluster():
 def test_ray_actors_survive_kill_minus_9(ray_cluster, controller, tmp_path):
   del ray_cluster
   killed = []
+  # Rollouts of 32 commands x 5 control steps (~0.1 s or more) are still
+  # running 20 ms after a collect starts, so the kill lands mid-rollout.
+  slow = dict(actors=2, envs_per_actor=1, command_period=0.25,
+              sequence_length=32, time_limit=1.0)  # Whole periods.
+  per_iteration = 2 * 1 * 32 * 5
 
   def kill_one_actor(iteration, row, pool):
     if iteration == 2:
       pids = pool.pids()
       assert len(set(pids)) == 2 and os.getpid() not in pids
-      # Killed while the next rollouts are being collected.
-      timer = threading.Timer(0.05, os.kill, (pids[1], signal.SIGKILL))
-      timer.start()
-      killed.append(timer)
+      collect = pool.collect
+
+      def collect_and_kill(*args, **kwargs):
+        if not killed:  # The next collect only.
+          timer = threading.Timer(0.02, os.kill, (pids[1], signal.SIGKILL))
+          timer.start()
+          killed.append(timer)
+        return collect(*args, **kwargs)
+      pool.collect = collect_and_kill
 
   summary = learner_loop.train(
-      _args(tmp_path / 'ray', controller, actors=2, envs_per_actor=1,
-            total_steps=5 * STEPS),
+      _args(tmp_path / 'ray', controller, total_steps=5 * per_iteration,
+            **slow),
       on_iteration=kill_one_actor)
   killed[0].join()
   assert summary['update'] == summary['iterations'] == 5
-  assert summary['env_steps'] == 5 * STEPS
+  assert summary['env_steps'] == 5 * per_iteration
   assert summary['restarts'] == 1
   rows = _rows(tmp_path / 'ray')
   assert [int(r['update']) for r in rows] == [1, 2, 3, 4, 5]
