@@ -175,9 +175,9 @@ class ParallelEnv(pettingzoo.ParallelEnv):
 
     `terminations` are True when the task ended the episode (failure,
     physics divergence, success with `end_on_success`: dm_env discount 0),
-    `truncations` only at the time limit. At the last step every agent's info holds
-    'episode_metrics' (`CoopEnvironment.episode_metrics()`), and `agents`
-    becomes empty: call `reset()` before stepping again.
+    `truncations` only at the time limit. At the last step every agent's
+    info holds 'episode_metrics' (`CoopEnvironment.episode_metrics()`), and
+    `agents` becomes empty: call `reset()` before stepping again.
 
     Args:
       actions: dict agent id -> array-like [8], one entry per live agent.

@@ -219,7 +219,9 @@ def film(spec, config, models, seed: int, path: str, size=(640, 480),
   return filming[0].frames
 
 
-def _mean_and_error(values):
+def mean_and_error(values):
+  """(mean, standard error of the mean) of `values`; the error is 0 for one
+  value."""
   values = np.asarray(values, np.float64)
   error = values.std(ddof=1) / np.sqrt(len(values)) if len(values) > 1 else 0.
   return float(values.mean()), float(error)
@@ -244,13 +246,13 @@ def evaluate(args: EvalArgs) -> dict:
     if args.video and len(per_model) == 1:
       film(spec, config, models, args.seeds[0], args.video,
            (args.width, args.height), not args.stochastic)
-  success, success_se = _mean_and_error([e['success'] for e in episodes])
-  ret, ret_se = _mean_and_error([e['return'] for e in episodes])
+  success, success_se = mean_and_error([e['success'] for e in episodes])
+  ret, ret_se = mean_and_error([e['return'] for e in episodes])
   out = {'description': description, 'episodes': len(episodes),
          'success': success, 'success_se': success_se, 'return': ret,
          'return_se': ret_se, 'models': per_model}
   if len(per_model) > 1:
-    out['success_se_models'] = _mean_and_error(
+    out['success_se_models'] = mean_and_error(
         [m['success'] for m in per_model])[1]
   return out
 

@@ -137,7 +137,8 @@ def _train(args, checkpoint, on_iteration):
     saved = checkpoints.restore(checkpoint, learners)
     counters.update({k: saved[k] for k in counters})
     window.restore(saved.get('window', []))
-    best_score = saved.get('best_score')
+    if saved.get('best_score') is not None:  # JSON gives a list.
+      best_score = tuple(saved['best_score'])
   state = {'args': args.to_dict(), 'agent_config': config_lib.json_safe(
       dataclasses.asdict(config)), 'species': [s.to_dict() for s in layout]}
   per_iteration = (args.num_actors * args.envs_per_actor
@@ -202,7 +203,7 @@ def _train(args, checkpoint, on_iteration):
         progress.update(row, steps)
         score = _window_score(row) if window.full else None
         if args.keep_best and score and (best_score is None
-                                         or score > tuple(best_score)):
+                                         or score > best_score):
           best_score = score
           checkpoints.save_best(args.logdir, learners, {
               **counters, **state, 'window': window.state(),

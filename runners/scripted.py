@@ -6,9 +6,10 @@ The policy issues position-paradigm commands through `CommandWrapper` and
 the shipped lower layer, reading the world state a learned policy only sees
 through its exteroception: every agent walks to a slot behind the cylinder
 (on the side away from the target), then walks through the cylinder towards
-the target; all stand still once the cylinder is near the target's centre. It needs no training and no memory, so its success rate shows
-what the command interface and the frozen lower layer allow within the time
-limit; a learned policy far below it is limited by learning (samples, reward,
+the target; all stand still once the cylinder is near the target's centre.
+It needs no training and no memory, so its success rate shows what the
+command interface and the frozen lower layer allow within the time limit;
+a learned policy far below it is limited by learning (samples, reward,
 exploration), not by its legs.
 
 Prints the success rate with its standard error over the episodes and the
@@ -20,6 +21,7 @@ import os
 import numpy as np
 
 from runners import cli
+from runners import evaluate
 
 os.environ.setdefault('MUJOCO_GL', 'egl')
 
@@ -47,9 +49,10 @@ def push_from_behind(task, physics) -> np.ndarray:
   cylinder = task.cylinder.position(physics)[:2]
   target = task.arena.target_position
   n = len(task.walkers)
-  if np.linalg.norm(target - cylinder) < STOP_RADIUS:
+  distance = np.linalg.norm(target - cylinder)
+  if distance < STOP_RADIUS:
     return np.zeros((n, 2))
-  push = (target - cylinder) / max(np.linalg.norm(target - cylinder), 1e-6)
+  push = (target - cylinder) / distance
   side = np.array([-push[1], push[0]])
   frames = observables.AgentFrames.from_walkers(task.walkers, physics)
   slots = np.linspace(-SLOT_SPREAD, SLOT_SPREAD, n) if n > 1 else [0.0]
@@ -98,9 +101,7 @@ def play(args: ScriptedArgs) -> dict:
     successes.append(float(env.episode_metrics()['success']))
     lengths.append(commands * args.command_period)
     env.close()
-  success = float(np.mean(successes))
-  error = (float(np.std(successes, ddof=1) / np.sqrt(len(successes)))
-           if len(successes) > 1 else 0.0)
+  success, error = evaluate.mean_and_error(successes)
   return {'success': success, 'success_se': error,
           'length': float(np.mean(lengths)), 'episodes': len(successes)}
 
