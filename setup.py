@@ -24,6 +24,9 @@ setuptools.setup(
         # load with "'MjModel' object has no attribute 'flex_vertedge'".
         "dm-control==1.0.50",
         "mujoco>=3.17,<3.18",
+        # Compiled per-step features (coop_suite/kernels.py); 0.60 is the
+        # first release for numpy 2.
+        "numba>=0.60",
         "dm-env",
         "numpy",
         "jax",

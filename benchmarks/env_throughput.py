@@ -5,9 +5,10 @@
 For each task and agent count, runs random actions through the composer
 environment and, on the very same compiled model and data, the raw
 `mj_step` loop a bare simulator would run (set `ctrl`, then one `mj_step` per
-physics substep). The two are interleaved in rounds so that drift on a shared
-machine hits both alike; the printed ratio is what matters, absolute rates
-vary with the machine's load. Single process, one core.
+physics substep). The two alternate in short blocks and the ratio is the
+median of the blocks' ratios, so that drift on a shared machine hits both
+alike; the ratio is what matters, absolute rates vary with the machine's
+load. Single process, one core.
 """
 
 import argparse
@@ -25,8 +26,13 @@ CASES = [(task, n) for task in ("transport", "corridor", "ravine")
          for n in (1, 2, 4, 8)] + [("walk_to_target", 1), ("walk_velocity", 1)]
 
 
-def measure(task, n_agents, steps, rounds, seed=0):
-  """Returns (composer steps/s, raw steps/s, real-time factor)."""
+def measure(task, n_agents, steps, rounds, seed=0, observe=True):
+  """Returns (composer steps/s, raw steps/s, real-time factor, ratio).
+
+  Rates are medians over the rounds; the ratio is the median of the rounds'
+  own ratios, each from two back-to-back blocks, so that the drift of a
+  shared machine cancels out.
+  """
   env = coop_suite.load(task, n_agents, seed=seed, time_limit=1e9)
   env.reset()
   n = env.n_agents
@@ -34,39 +40,46 @@ def measure(task, n_agents, steps, rounds, seed=0):
   control_dt = env.control_timestep()
   actions = np.random.RandomState(seed).uniform(-1, 1, (steps, n, 8))
   model, data = env.physics.model.ptr, env.physics.data.ptr
-  composer_time = raw_time = 0.0
+  composer_times, raw_times = [], []
   for _ in range(rounds):
     start = time.perf_counter()
     for action in actions:
-      env.step(action)
-    composer_time += time.perf_counter() - start
+      env.step(action, observe=observe)
+    composer_times.append(time.perf_counter() - start)
     start = time.perf_counter()
     for action in actions:
       data.ctrl[:] = action.ravel()
       for _ in range(substeps):
         mujoco.mj_step(model, data)
-    raw_time += time.perf_counter() - start
-  total = steps * rounds
-  composer_rate, raw_rate = total / composer_time, total / raw_time
-  return composer_rate, raw_rate, composer_rate * control_dt
+    raw_times.append(time.perf_counter() - start)
+  composer_rate = steps / np.median(composer_times)
+  raw_rate = steps / np.median(raw_times)
+  ratio = np.median(np.array(raw_times) / np.array(composer_times))
+  return composer_rate, raw_rate, composer_rate * control_dt, ratio
 
 
 def main():
   parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-  parser.add_argument("--steps", type=int, default=1000,
-                      help="control steps per round")
-  parser.add_argument("--rounds", type=int, default=5)
+  parser.add_argument("--steps", type=int, default=200,
+                      help="control steps per block")
+  parser.add_argument("--rounds", type=int, default=20,
+                      help="pairs of blocks (composer, then raw)")
   parser.add_argument("--tasks", nargs="*", default=None,
                       help="restrict to these tasks")
+  parser.add_argument("--skip-observation", action="store_true",
+                      help="env.step(action, observe=False): what the step "
+                      "costs without building the observation")
   args = parser.parse_args()
   print(f"{'task':16s} {'agents':>6s} {'steps/s':>9s} {'x real':>7s} "
         f"{'raw steps/s':>11s} {'ratio':>6s}")
   for task, n_agents in CASES:
     if args.tasks and task not in args.tasks:
       continue
-    rate, raw, realtime = measure(task, n_agents, args.steps, args.rounds)
+    rate, raw, realtime, ratio = measure(
+        task, n_agents, args.steps, args.rounds,
+        observe=not args.skip_observation)
     print(f"{task:16s} {n_agents:6d} {rate:9.0f} {realtime:7.1f} {raw:11.0f} "
-          f"{rate / raw:6.2f}", flush=True)
+          f"{ratio:6.2f}", flush=True)
 
 
 if __name__ == "__main__":

@@ -177,8 +177,7 @@ class CommandWrapper:
   # --- Internals -------------------------------------------------------------
 
   def _frames(self):
-    return frames_lib.AgentFrames.from_walkers(self._env.task.walkers,
-                                               self._env.physics)
+    return self._env.task.frames(self._env.physics)
 
   def _controller_inputs(self):
     """Controller observations [n_agents, k] per key: proprioception as the

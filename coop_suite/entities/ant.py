@@ -18,6 +18,8 @@ from dm_control.composer.observation import observable
 from dm_env import specs
 import numpy as np
 
+from coop_suite import kernels
+
 _XML_PATH = os.path.join(os.path.dirname(__file__), "assets", "ant.xml")
 
 # Height of the torso centre when the ant stands on flat ground (metres).
@@ -75,6 +77,18 @@ class Ant(composer.Robot):
   @property
   def prev_action(self):
     return self._prev_action
+
+  def share_action_buffer(self, buffer):
+    """Makes `prev_action` a view of `buffer` (shape [8]).
+
+    A task that writes every agent's controls in one call (instead of one
+    `apply_action` per walker) passes a row of its [n, 8] action array, so
+    that `prev_action` stays current.
+    """
+    if buffer.shape != (NUM_ACTUATORS,):
+      raise ValueError(f"Action buffer must have shape ({NUM_ACTUATORS},), "
+                       f"got {buffer.shape}.")
+    self._prev_action = buffer
 
   @property
   def joint_ranges(self):
@@ -150,30 +164,42 @@ def proprioception(walkers, physics, prev_actions):
     joints_pos [n, 8] rad, joints_vel [n, 8] rad/s, torso_height [n, 1] m
     (world z), gravity [n, 3] (the world's up axis seen from the torso),
     velocity [n, 3] m/s, angular_velocity [n, 3] rad/s, prev_action [n, 8].
-  Vectorised over agents because tasks call it once per control step.
+  For repeated reads, build a `ProprioceptionReader` once instead.
   """
-  # pylint: disable=protected-access
-  data = physics.data
-  torso = [w._torso_id for w in walkers]
-  qpos_adr = np.concatenate([w._joint_qpos_adr for w in walkers])
-  dof_adr = np.concatenate([w._joint_dof_adr for w in walkers])
-  free = np.array([w._free_dof_adr for w in walkers])[:, None] + np.arange(6)
-  n = len(walkers)
-  xmat = data.xmat[torso].reshape(n, 3, 3)
-  free_vel = data.qvel[free]
-  return {
-      "joints_pos": data.qpos[qpos_adr].reshape(n, -1),
-      "joints_vel": data.qvel[dof_adr].reshape(n, -1),
-      "torso_height": data.xpos[torso][:, 2:3],
-      "gravity": xmat[:, 2, :],
-      "velocity": np.einsum("nji,nj->ni", xmat, free_vel[:, :3]),
-      "angular_velocity": free_vel[:, 3:],
-      "prev_action": np.array(prev_actions, dtype=np.float64).reshape(n, -1),
-  }
+  return ProprioceptionReader(walkers)(physics, prev_actions)
 
 
-PROPRIOCEPTION_KEYS = ("joints_pos", "joints_vel", "torso_height", "gravity",
-                       "velocity", "angular_velocity", "prev_action")
+class ProprioceptionReader:
+  """Reads `proprioception` of a fixed set of compiled Ants, vectorised.
+
+  The index arrays into `physics.data` are gathered once and one compiled
+  kernel reads all Ants: tasks read every agent's proprioception at every
+  control step, where per-walker indexing would cost more than the physics.
+  The returned arrays are views of one new array, never of `physics.data`,
+  so observations stay valid after later steps.
+  """
+
+  def __init__(self, walkers):
+    # pylint: disable=protected-access
+    self._torso = np.array([w._torso_id for w in walkers])
+    self._qpos = np.stack([w._joint_qpos_adr for w in walkers])
+    self._dof = np.stack([w._joint_dof_adr for w in walkers])
+    self._free = np.array([w._free_dof_adr for w in walkers])
+    columns, start = {}, 0
+    for name, size in kernels.PROPRIO_LAYOUT:
+      columns[name] = slice(start, start + size)
+      start += size
+    self._columns = tuple(columns.items())
+
+  def __call__(self, physics, prev_actions):
+    data = physics.data
+    packed = kernels.proprioception(
+        data.xpos, data.xmat, data.qpos, data.qvel, self._torso, self._qpos,
+        self._dof, self._free, np.asarray(prev_actions, dtype=np.float64))
+    return {name: packed[:, columns] for name, columns in self._columns}
+
+
+PROPRIOCEPTION_KEYS = tuple(name for name, _ in kernels.PROPRIO_LAYOUT)
 
 
 class AntObservables(composer.Observables):

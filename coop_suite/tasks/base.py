@@ -29,6 +29,7 @@ import numpy as np
 
 from coop_suite.entities import Ant
 from coop_suite.entities import ant as ant_lib
+from coop_suite import kernels
 from coop_suite.tasks import observables as extero
 
 SPECIES_COLOURS = {
@@ -99,15 +100,14 @@ class CoopTask(composer.Task):
         f"{int(4 + np.ceil(config.memory_mb_per_agent * len(species)))}M")
     self.set_timesteps(control_timestep=config.control_timestep,
                        physics_timestep=config.physics_timestep)
-    self._last_actions = np.zeros((self.n_agents, 8))
+    self._last_actions = np.zeros((self.n_agents, ant_lib.NUM_ACTUATORS))
+    for walker, row in zip(self._walkers, self._last_actions):
+      walker.share_action_buffer(row)
     self._heights = extero.HeightSampler(config.height_grid,
                                          config.height_spacing)
-    self._cache_key = None
-    self._cache = None
-    self._cached_groups = set()
     self._checked_groups = set()
-    self._frames = None
-    self._per_state_cache = {}
+    self._state_key = None
+    self._state_cache = {}
     self._state_version = 0
     self._reset_bookkeeping()
     self._agent_observables = [
@@ -197,6 +197,9 @@ class CoopTask(composer.Task):
     # Runs before the entities' own after_compile, so bind here.
     self._torso_ids = np.array(physics.bind(
         [w.root_body for w in self._walkers]).element_id)
+    self._actuator_ids = np.array(physics.bind(
+        [a for w in self._walkers for a in w.actuators]).element_id)
+    self._proprioception = None  # Built on first use, once walkers bound.
 
   def initialize_episode(self, physics, random_state):
     self._reset_bookkeeping()
@@ -204,10 +207,12 @@ class CoopTask(composer.Task):
     self._initialize_layout(physics, random_state)
 
   def before_step(self, physics, action, random_state):
+    """Writes every agent's action [n, 8] to the controls in one call (what
+    `Ant.apply_action` does per walker; walkers' `prev_action` are rows of
+    `_last_actions`)."""
     self._state_version += 1
-    for walker, walker_action in zip(self._walkers, action):
-      walker.apply_action(physics, walker_action, random_state)
     self._last_actions[:] = action
+    physics.data.ctrl[self._actuator_ids] = self._last_actions.ravel()
 
   def after_step(self, physics, random_state):
     self._steps += 1
@@ -237,15 +242,22 @@ class CoopTask(composer.Task):
     return bool(self._failure
                 or (self._success and self._config.end_on_success))
 
-  def observation_batch(self, physics, layout):
-    """Observations for `layout` ([(name, agent index), ...] per agent).
+  def observation_batch(self, physics, names):
+    """Every agent's observation dict of the features `names`.
 
-    The fast path of `CoopEnvironment`: one feature computation, then slices.
+    The fast path of `CoopEnvironment`: one feature computation, then row
+    views of its [n, dim] arrays. Views are safe: `features` builds new
+    arrays at every physics state.
     """
     features = self.features(physics)
-    # Views are safe: `features` builds new arrays at every physics state.
-    return [{name: features[name][index] for name, index in agent}
-            for agent in layout]
+    return [{name: features[name][i] for name in names}
+            for i in range(self.n_agents)]
+
+  def frames(self, physics):
+    """Every agent's torso position and heading (`AgentFrames`), computed
+    once per physics state."""
+    return self.per_state("frames", physics, lambda: extero.AgentFrames
+                          .from_bodies(physics, self._torso_ids))
 
   def features(self, physics, groups=FEATURE_GROUPS):
     """Observations of every agent: 'group/name' -> [n_agents, dim].
@@ -261,25 +273,27 @@ class CoopTask(composer.Task):
     Each group is computed at most once per physics state and cached, since
     every agent's observables read from it.
     """
-    key = (self._state_version, physics.data.time)
-    if key != self._cache_key:
-      self._cache_key, self._cache = key, {}
-      self._cached_groups = set()
-      self._frames = extero.AgentFrames.from_walkers(self._walkers, physics)
+    cache = self._per_state_cache(physics)
+    features = cache.get("features")
+    if features is None:
+      features = cache["features"] = {}
+      cache["feature_groups"] = set()
+    done = cache["feature_groups"]
     for group in groups:
-      if group not in self._cached_groups:
-        values = self._compute_group(group, physics, self._frames)
+      if group not in done:
+        values = self._compute_group(group, physics, self.frames(physics))
         if group not in self._checked_groups:
           self._check_group(group, values)
-        self._cache.update(values)
-        self._cached_groups.add(group)
-    return self._cache
+        features.update(values)
+        done.add(group)
+    return features
 
   def _compute_group(self, group, physics, frames):
     """One group's features: 'group/name' -> [n_agents, dim]."""
     if group == "proprio":
-      values = ant_lib.proprioception(self._walkers, physics,
-                                      self._last_actions)
+      if self._proprioception is None:
+        self._proprioception = ant_lib.ProprioceptionReader(self._walkers)
+      values = self._proprioception(physics, self._last_actions)
     elif group == "extero":
       values = dict(self._exteroception(physics, frames))
       if self.SHARED_EXTERO:
@@ -312,12 +326,21 @@ class CoopTask(composer.Task):
   def per_state(self, name, physics, fn):
     """`fn()` computed once per physics state (e.g. distances that both the
     status update and the reward need)."""
+    cache = self._per_state_cache(physics)
+    try:
+      return cache[name]
+    except KeyError:
+      value = cache[name] = fn()
+      return value
+
+  def _per_state_cache(self, physics):
+    """A dict for values of the current physics state, emptied when the
+    state changes (a step, a reset, or time moving on outside `step`)."""
     key = (self._state_version, physics.data.time)
-    cached = self._per_state_cache.get(name)
-    if cached is None or cached[0] != key:
-      cached = (key, fn())
-      self._per_state_cache[name] = cached
-    return cached[1]
+    if key != self._state_key:
+      self._state_key = key
+      self._state_cache = {}
+    return self._state_cache
 
   def _exteroception(self, physics, frames):
     """The task's `extero/*` features named in `EXTERO_FEATURES`."""
@@ -370,14 +393,17 @@ class CoopTask(composer.Task):
     return out
 
   def _shared_exteroception(self, physics, frames):
-    """Features every cooperative task exposes (see `observables.py`)."""
-    teammates, mask = extero.nearest_teammates(frames,
-                                               self._config.k_neighbours)
+    """Features every cooperative task exposes (see `observables.py`), from
+    one compiled call."""
+    k = self._config.k_neighbours
+    shared = kernels.shared_exteroception(
+        *kernels.mujoco_pointers(physics), frames.as_packed(), k,
+        *self._heights.ray_args)
     return {
-        "self_pose": extero.self_pose(frames),
-        "teammates": teammates,
-        "teammates_mask": mask,
-        "heights": self._heights(physics, frames),
+        "self_pose": shared[:, :4],
+        "teammates": shared[:, 4:4 + 2 * k],
+        "teammates_mask": shared[:, 4 + 2 * k:4 + 3 * k],
+        "heights": shared[:, 4 + 3 * k:],
     }
 
 

@@ -2,7 +2,8 @@
 
 Features are computed for all agents at once (arrays with a leading agent
 axis [n, ...]) because composer's per-observable overhead, paid once per
-agent and feature, would otherwise cost more than the physics itself.
+agent and feature, would otherwise cost more than the physics itself; the
+shared ones (frames, teammates, heights) in compiled kernels (`kernels.py`).
 
 Planar vectors are expressed in each agent's heading frame: the world frame
 rotated by the torso's yaw (x ahead, y to the left), in metres. Sizes never
@@ -11,10 +12,10 @@ depend on the number of agents, so one policy runs in any population.
 
 import typing
 
-import mujoco
 import numpy as np
 
 from coop_suite.arenas import TERRAIN_GROUP
+from coop_suite import kernels
 
 # Height-sample rays start this far above the agent's torso (metres). The
 # rays fan out from one point (one `mj_multiRay` call per agent), so a high
@@ -30,15 +31,28 @@ class AgentFrames(typing.NamedTuple):
   position: np.ndarray  # [n, 3] torso centres, world frame (m).
   cos: np.ndarray  # [n] cosine of the heading (yaw).
   sin: np.ndarray  # [n] sine of the heading (yaw).
+  packed: typing.Optional[np.ndarray] = None
+  """[n, 5] x, y, z, cos, sin: the other fields are views of it, and the
+  compiled kernels read it. None for frames built by hand (see `as_packed`)."""
 
   @classmethod
   def from_walkers(cls, walkers, physics):
-    ids = [w._torso_id for w in walkers]  # pylint: disable=protected-access
-    xmat = physics.data.xmat[ids]
-    cos, sin = xmat[:, 0], xmat[:, 3]
-    norm = np.hypot(cos, sin)
-    norm[norm == 0] = 1.0
-    return cls(physics.data.xpos[ids].copy(), cos / norm, sin / norm)
+    ids = np.array([w._torso_id for w in walkers])  # pylint: disable=protected-access
+    return cls.from_bodies(physics, ids)
+
+  @classmethod
+  def from_bodies(cls, physics, body_ids):
+    """Frames of the bodies `body_ids` (the agents' torsos)."""
+    packed = kernels.heading_frames(physics.data.xpos, physics.data.xmat,
+                                    body_ids)
+    return cls(packed[:, :3], packed[:, 3], packed[:, 4], packed)
+
+  def as_packed(self):
+    """The [n, 5] array the kernels read, built if the frames lack one."""
+    if self.packed is not None:
+      return self.packed
+    return np.column_stack([self.position, self.cos, self.sin]).astype(
+        np.float64)
 
   def to_heading_frame(self, world_xy):
     """Offsets from each agent to world points, in its heading frame.
@@ -50,27 +64,24 @@ class AgentFrames(typing.NamedTuple):
       [n, 2] or [n, m, 2] offsets, heading frame (m).
     """
     world_xy = np.asarray(world_xy, dtype=np.float64)
-    origin, cos, sin = self.position[:, :2], self.cos, self.sin
-    if world_xy.ndim == 3:
-      origin, cos, sin = origin[:, None], cos[:, None], sin[:, None]
-    return rotate_to_heading(world_xy - origin, cos, sin)
+    shape = world_xy.shape
+    if (not 1 <= len(shape) <= 3 or shape[-1] != 2
+        or (len(shape) > 1 and shape[0] != len(self.cos))):
+      raise ValueError(f"Expected world points of shape [2], [{len(self.cos)}"
+                       f", 2] or [{len(self.cos)}, m, 2]; got {shape}.")
+    if world_xy.ndim == 1:  # One point for all: [1, 2].
+      return kernels.heading_offsets(self.as_packed(), world_xy[None])[:, 0]
+    if world_xy.ndim == 2:  # One point per agent: [n, 1, 2].
+      return kernels.heading_offsets(self.as_packed(), world_xy[:, None])[:, 0]
+    return kernels.heading_offsets(self.as_packed(), world_xy)
 
 
 def rotate_to_heading(delta, cos, sin):
   """Rotates world-frame offsets [..., 2] by -yaw (cos, sin broadcast)."""
   dx, dy = delta[..., 0], delta[..., 1]
-  out = np.empty(np.broadcast_shapes(dx.shape, np.shape(cos)) + (2,))
+  out = np.empty(np.broadcast(dx, cos).shape + (2,))
   out[..., 0] = cos * dx + sin * dy
   out[..., 1] = cos * dy - sin * dx
-  return out
-
-
-def self_pose(frames):
-  """World pose [x, y, cos(yaw), sin(yaw)] per agent, shape [n, 4]."""
-  out = np.empty((len(frames.cos), 4))
-  out[:, :2] = frames.position[:, :2]
-  out[:, 2] = frames.cos
-  out[:, 3] = frames.sin
   return out
 
 
@@ -81,24 +92,9 @@ def nearest_teammates(frames, k):
     offsets: [n, k * 2], heading frame (m), nearest first, zero padding.
     mask: [n, k], 1.0 for a real teammate and 0.0 for padding.
   """
-  n = len(frames.cos)
-  offsets = np.zeros((n, k, 2))
-  mask = np.zeros((n, k))
-  m = min(k, n - 1)
-  if m > 0:
-    xy = frames.position[:, :2]
-    delta = xy[None, :, :] - xy[:, None, :]  # [i, j]: from agent i to j.
-    dist2 = np.einsum("ijk,ijk->ij", delta, delta)
-    np.fill_diagonal(dist2, np.inf)
-    if m == 1:
-      order = np.argmin(dist2, axis=1)[:, None]
-    else:
-      order = np.argsort(dist2, axis=1)[:, :m]
-    nearest = delta[np.arange(n)[:, None], order]  # [n, m, 2]
-    offsets[:, :m] = rotate_to_heading(nearest, frames.cos[:, None],
-                                       frames.sin[:, None])
-    mask[:, :m] = 1.0
-  return offsets.reshape(n, -1), mask
+  out = np.empty((len(frames.cos), 3 * k))
+  kernels.nearest_teammates(frames.as_packed(), k, out, 0)
+  return out[:, :2 * k], out[:, 2 * k:]
 
 
 class HeightSampler:
@@ -123,29 +119,20 @@ class HeightSampler:
     self._local_dirs = rays / np.linalg.norm(rays, axis=1, keepdims=True)
     self._group = np.zeros(6, dtype=np.uint8)
     self._group[TERRAIN_GROUP] = 1
-    self._geom_id = np.zeros(self._num, dtype=np.int32)
 
   @property
   def size(self):
     return self._num
 
+  @property
+  def ray_args(self):
+    """The arguments of `kernels.terrain_heights` that follow `frames`."""
+    return (self._local_dirs, self._scale, self._group, _RAY_ORIGIN_HEIGHT,
+            _NO_HIT_HEIGHT)
+
   def __call__(self, physics, frames):
     """Returns [n, grid * grid] heights (m, world z)."""
-    n = len(frames.cos)
-    lx, ly, lz = self._local_dirs.T
-    c, s = frames.cos[:, None], frames.sin[:, None]
-    dirs = np.empty((n, self._num, 3))
-    dirs[..., 0] = c * lx - s * ly
-    dirs[..., 1] = s * lx + c * ly
-    dirs[..., 2] = lz
-    origins = frames.position.copy()
-    origins[:, 2] = _RAY_ORIGIN_HEIGHT
-    dist = np.empty((n, self._num))
-    model, data = physics.model.ptr, physics.data.ptr
-    for i in range(n):
-      mujoco.mj_multiRay(model, data, origins[i], dirs[i].ravel(),
-                         self._group, 1, -1, self._geom_id, dist[i], None,
-                         self._num, 100.0)
-    heights = _RAY_ORIGIN_HEIGHT - dist / self._scale
-    return np.where(dist >= 0, np.maximum(heights, _NO_HIT_HEIGHT),
-                    _NO_HIT_HEIGHT)
+    out = np.empty((len(frames.cos), self._num))
+    kernels.terrain_heights(*kernels.mujoco_pointers(physics),
+                            frames.as_packed(), *self.ray_args, out, 0)
+    return out

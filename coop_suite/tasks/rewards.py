@@ -15,8 +15,9 @@ def inverse_distance(scale, distance):
 
 def planar_distance(a_xy, b_xy):
   """Euclidean distance over the last axis of [..., 2] arrays (metres)."""
-  delta = np.asarray(a_xy) - np.asarray(b_xy)
-  return np.sqrt(np.sum(delta * delta, axis=-1))
+  delta = np.subtract(a_xy, b_xy)
+  dx, dy = delta[..., 0], delta[..., 1]
+  return np.sqrt(dx * dx + dy * dy)
 
 
 def velocity_tracking(scale, velocity_xy, command_xy, min_speed=0.05):

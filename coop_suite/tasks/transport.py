@@ -81,12 +81,13 @@ class Transport(base.CoopTask):
   def _distances(self, physics):
     """d(cylinder, target) [], d(agent, cylinder) [n], d(agent, target) [n]."""
     def compute():
-      cylinder = self.cylinder.position(physics)[:2]
-      target = self._arena.target_position
-      agents = physics.data.xpos[self._torso_ids, :2]
-      return (rewards.planar_distance(cylinder, target),
-              rewards.planar_distance(agents, cylinder),
-              rewards.planar_distance(agents, target))
+      goals = np.empty((2, 2))  # The cylinder and the target.
+      goals[0] = self.cylinder.position(physics)[:2]
+      goals[1] = self._arena.target_position
+      agents = self.frames(physics).position[:, None, :2]
+      to_goals = rewards.planar_distance(agents, goals)
+      return (rewards.planar_distance(goals[0], goals[1]), to_goals[:, 0],
+              to_goals[:, 1])
     return self.per_state("distances", physics, compute)
 
   def _update_status(self, physics):

@@ -1,0 +1,164 @@
+"""The compiled feature kernels against plain numpy on real physics states.
+
+The kernels replaced numpy code with the same floating-point operations in
+the same order, so the shipped controllers see the very same numbers: these
+tests compare bit for bit (`assert_array_equal`), not within a tolerance.
+"""
+
+import mujoco
+import numpy as np
+import pytest
+
+import coop_suite
+from coop_suite import kernels
+from coop_suite.entities import ant as ant_lib
+from coop_suite.tasks import observables
+
+
+def _states(task, n_agents, steps=30, **options):
+  """An environment stepped with random actions, yielding at each step."""
+  env = coop_suite.load(task, n_agents, seed=1, **options)
+  env.reset()
+  rng = np.random.RandomState(0)
+  for _ in range(steps):
+    env.step(rng.uniform(-1, 1, (env.n_agents, 8)))
+    yield env
+
+
+def _numpy_frames(env):
+  ids = env.task._torso_ids  # pylint: disable=protected-access
+  xmat = env.physics.data.xmat[ids]
+  cos, sin = xmat[:, 0], xmat[:, 3]
+  norm = np.hypot(cos, sin)
+  norm[norm == 0] = 1.0
+  return env.physics.data.xpos[ids], cos / norm, sin / norm
+
+
+def _numpy_rotate(delta, cos, sin):
+  return np.stack([cos * delta[..., 0] + sin * delta[..., 1],
+                   cos * delta[..., 1] - sin * delta[..., 0]], -1)
+
+
+def test_frames_and_proprioception_match_numpy():
+  for env in _states("transport", 3):
+    frames = env.task.frames(env.physics)
+    position, cos, sin = _numpy_frames(env)
+    np.testing.assert_array_equal(frames.position, position)
+    np.testing.assert_array_equal(frames.cos, cos)
+    np.testing.assert_array_equal(frames.sin, sin)
+
+    walkers, data = env.task.walkers, env.physics.data
+    # pylint: disable=protected-access
+    xmat = np.stack([data.xmat[w._torso_id].reshape(3, 3) for w in walkers])
+    free = np.stack([data.qvel[w._free_dof_adr:w._free_dof_adr + 6]
+                     for w in walkers])
+    expected = {
+        "joints_pos": np.stack([data.qpos[w._joint_qpos_adr]
+                                for w in walkers]),
+        "joints_vel": np.stack([data.qvel[w._joint_dof_adr]
+                                for w in walkers]),
+        "torso_height": position[:, 2:3],
+        "gravity": xmat[:, 2, :],
+        "velocity": np.einsum("nji,nj->ni", xmat, free[:, :3]),
+        "angular_velocity": free[:, 3:],
+        "prev_action": np.stack([w.prev_action for w in walkers]),
+    }
+    got = env.task.features(env.physics, ("proprio",))
+    assert set(ant_lib.PROPRIOCEPTION_KEYS) == set(expected)
+    for name, value in expected.items():
+      np.testing.assert_array_equal(got[f"proprio/{name}"], value, name)
+
+
+@pytest.mark.parametrize("n,k", [(1, 1), (2, 1), (4, 1), (4, 2), (3, 3),
+                                 (6, 4)])
+def test_nearest_teammates_match_numpy(n, k):
+  rng = np.random.RandomState(n * 10 + k)
+  yaw = rng.uniform(-np.pi, np.pi, n)
+  frames = observables.AgentFrames(rng.uniform(-5, 5, (n, 3)), np.cos(yaw),
+                                   np.sin(yaw))
+  offsets, mask = observables.nearest_teammates(frames, k)
+  xy = frames.position[:, :2]
+  delta = xy[None] - xy[:, None]
+  dist2 = np.einsum("ijk,ijk->ij", delta, delta)
+  np.fill_diagonal(dist2, np.inf)
+  m = min(k, n - 1)
+  order = np.argsort(dist2, axis=1, kind="stable")[:, :m]
+  expected = np.zeros((n, k, 2))
+  expected[:, :m] = _numpy_rotate(delta[np.arange(n)[:, None], order],
+                                  frames.cos[:, None], frames.sin[:, None])
+  np.testing.assert_array_equal(offsets, expected.reshape(n, -1))
+  np.testing.assert_array_equal(mask, np.arange(k)[None].repeat(n, 0) < m)
+
+
+def test_heights_match_mujoco_rays_over_the_ravine():
+  """Bit-identical to one `mujoco.mj_multiRay` call per agent, on terrain
+  with a trench and a stone (pushers stand inside the trench)."""
+  sampler = observables.HeightSampler(3, 0.6)
+  local_dirs, scale, group, origin_height, no_hit = sampler.ray_args
+  saw_trench = False
+  for env in _states("ravine", 2, steps=10):
+    frames = env.task.frames(env.physics)
+    got = sampler(env.physics, frames)
+    for i in range(len(frames.cos)):
+      c, s = frames.cos[i], frames.sin[i]
+      lx, ly, lz = local_dirs.T
+      dirs = np.stack([c * lx - s * ly, s * lx + c * ly, lz], -1)
+      origin = np.array([*frames.position[i, :2], origin_height])
+      dist = np.empty(len(local_dirs))
+      mujoco.mj_multiRay(env.physics.model.ptr, env.physics.data.ptr, origin,
+                         dirs.ravel(), group, 1, -1,
+                         np.zeros(len(dist), np.int32), dist, None, len(dist),
+                         100.0)
+      expected = np.where(dist >= 0, np.maximum(
+          origin_height - dist / scale, no_hit), no_hit)
+      np.testing.assert_array_equal(got[i], expected)
+    saw_trench |= bool(np.any(got < -0.5))
+  assert saw_trench, "no ray reached the trench floor: test not exercised"
+
+
+def test_heading_offsets_match_numpy_and_check_shapes():
+  rng = np.random.RandomState(3)
+  yaw = rng.uniform(-np.pi, np.pi, 4)
+  frames = observables.AgentFrames(rng.uniform(-5, 5, (4, 3)), np.cos(yaw),
+                                   np.sin(yaw))
+  origin, cos, sin = frames.position[:, :2], frames.cos, frames.sin
+  point = rng.uniform(-5, 5, 2)
+  per_agent = rng.uniform(-5, 5, (4, 2))
+  several = rng.uniform(-5, 5, (4, 3, 2))
+  np.testing.assert_array_equal(frames.to_heading_frame(point),
+                                _numpy_rotate(point - origin, cos, sin))
+  np.testing.assert_array_equal(frames.to_heading_frame(per_agent),
+                                _numpy_rotate(per_agent - origin, cos, sin))
+  np.testing.assert_array_equal(
+      frames.to_heading_frame(several),
+      _numpy_rotate(several - origin[:, None], cos[:, None], sin[:, None]))
+  for bad in (np.zeros(3), np.zeros((3, 2)), np.zeros((5, 1, 2)),
+              np.zeros((4, 2, 3)), np.zeros((1, 1, 1, 2))):
+    with pytest.raises(ValueError, match="world points"):
+      frames.to_heading_frame(bad)
+
+
+def test_observations_are_not_overwritten_by_later_steps():
+  """Kernels return new arrays: an observation kept from one step must not
+  change when the environment steps on (replay buffers keep them)."""
+  env = coop_suite.load("transport", 2, seed=0)
+  env.reset()
+  first = env.step(np.ones((2, 8))).observation
+  kept = [{k: v.copy() for k, v in agent.items()} for agent in first]
+  for _ in range(5):
+    env.step(-np.ones((2, 8)))
+  for agent, copy in zip(first, kept):
+    for key, value in copy.items():
+      np.testing.assert_array_equal(agent[key], value, key)
+
+
+def test_kernels_are_the_compiled_ones():
+  """Guards the speed-up itself: the kernels are numba dispatchers compiled
+  for the argument types the tasks use (not silently object mode)."""
+  for env in _states("transport", 2, steps=1):
+    env.task.features(env.physics)
+  for kernel in (kernels.heading_frames, kernels.proprioception,
+                 kernels.shared_exteroception):
+    assert kernel.signatures, kernel
+    assert all(not getattr(kernel.overloads[sig], "objectmode", False)
+               for sig in kernel.signatures)
