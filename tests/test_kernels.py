@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 import coop_suite
-from coop_suite import kernels
 from coop_suite.entities import ant as ant_lib
 from coop_suite.tasks import observables
 
@@ -150,15 +149,3 @@ def test_observations_are_not_overwritten_by_later_steps():
   for agent, copy in zip(first, kept):
     for key, value in copy.items():
       np.testing.assert_array_equal(agent[key], value, key)
-
-
-def test_kernels_are_the_compiled_ones():
-  """Guards the speed-up itself: the kernels are numba dispatchers compiled
-  for the argument types the tasks use (not silently object mode)."""
-  for env in _states("transport", 2, steps=1):
-    env.task.features(env.physics)
-  for kernel in (kernels.heading_frames, kernels.proprioception,
-                 kernels.shared_exteroception):
-    assert kernel.signatures, kernel
-    assert all(not getattr(kernel.overloads[sig], "objectmode", False)
-               for sig in kernel.signatures)
