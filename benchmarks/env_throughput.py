@@ -26,15 +26,19 @@ CASES = [(task, n) for task in ("transport", "corridor", "ravine")
          for n in (1, 2, 4, 8)] + [("walk_to_target", 1), ("walk_velocity", 1)]
 
 
-def measure(task, n_agents, steps, rounds, seed=0, observe=True):
+def measure(task, n_agents, steps, rounds, seed=0, observe=True,
+            prepare=None):
   """Returns (composer steps/s, raw steps/s, real-time factor, ratio).
 
   Rates are medians over the rounds; the ratio is the median of the rounds'
   own ratios, each from two back-to-back blocks, so that the drift of a
-  shared machine cancels out.
+  shared machine cancels out. `prepare(env)`, if given, runs after the
+  first reset (e.g. to switch parts of the step off).
   """
   env = coop_suite.load(task, n_agents, seed=seed, time_limit=1e9)
   env.reset()
+  if prepare is not None:
+    prepare(env)
   n = env.n_agents
   substeps = env.task.physics_steps_per_control_step
   control_dt = env.control_timestep()
