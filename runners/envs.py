@@ -145,9 +145,11 @@ class FlatEnv:
     timestep = self.env.step(actions)
     if timestep.first() or self.env.physics_diverged:
       return timestep
+    task = self.env.task
     terms = rewards.locomotion_terms(
-        self.env.task.walkers, self.env.physics,
-        np.clip(np.asarray(actions, np.float64), -1.0, 1.0), self._config)
+        task.features(self.env.physics, ('proprio',)),
+        np.clip(np.asarray(actions, np.float64), -1.0, 1.0),
+        task.joint_ranges, self._config)
     total = np.zeros(self.env.n_agents)
     for name, value in terms.items():
       self._sums[name] = self._sums.get(name, 0.0) + value

@@ -5,6 +5,7 @@ import pytest
 
 import coop_suite
 from coop_suite.tasks import layouts
+from coop_suite.tasks import locomotion
 from coop_suite.tasks import rewards
 
 ZERO = np.zeros((1, 8))
@@ -184,6 +185,34 @@ def test_walk_velocity_reward_terms():
   assert metrics["reward/action_cost"] == 0.0
   assert timestep.reward[0] == pytest.approx(
       sum(metrics[k] for k in metrics if k.startswith("reward/")), rel=1e-5)
+
+
+def test_locomotion_terms_match_each_ants_own_accessors():
+  """The vectorised terms (read from the shared proprioception) agree with
+  each Ant's own accessors, on states where joints reach their limits."""
+  env = coop_suite.load("transport", 3, seed=0)
+  env.reset()
+  rng = np.random.RandomState(0)
+  config = locomotion.LocomotionConfig()
+  limits_seen = 0
+  for _ in range(40):
+    actions = rng.choice([-1.0, 1.0], (3, 8))
+    env.step(actions)
+    terms = rewards.locomotion_terms(
+        env.task.features(env.physics, ("proprio",)), actions,
+        env.task.joint_ranges, config)
+    for i, walker in enumerate(env.task.walkers):
+      upright = walker.upright(env.physics)
+      at_limit = walker.joints_at_limit(env.physics)
+      limits_seen += at_limit
+      energy = np.sum(np.abs(actions[i] * 0.2
+                             * walker.joint_velocities(env.physics)))
+      assert terms["up"][i] == (0.1 if upright > 0.93 else 0.0)
+      assert terms["joint_limit_cost"][i] == -0.1 * at_limit
+      assert terms["energy_cost"][i] == pytest.approx(-0.05 * energy)
+      assert terms["action_cost"][i] == pytest.approx(-0.005 * 8)
+      assert terms["alive"][i] == 0.5
+  assert limits_seen > 0, "no joint reached its limit: test not exercised"
 
 
 def test_walk_velocity_tracking_figures_cover_only_the_steps_they_apply_to():

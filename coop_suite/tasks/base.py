@@ -106,6 +106,8 @@ class CoopTask(composer.Task):
     self._heights = extero.HeightSampler(config.height_grid,
                                          config.height_spacing)
     self._checked_groups = set()
+    self._proprioception = None  # See `after_compile`.
+    self._joint_ranges = None
     self._state_key = None
     self._state_cache = {}
     self._state_version = 0
@@ -175,6 +177,13 @@ class CoopTask(composer.Task):
     parts.append(np.asarray(self._task_state(physics), dtype=np.float64))
     return np.concatenate(parts).astype(np.float32)
 
+  @property
+  def joint_ranges(self):
+    """Every agent's joint limits as compiled, [n_agents, 8, 2] (rad)."""
+    if self._joint_ranges is None:
+      self._joint_ranges = np.stack([w._joint_limits for w in self._walkers])  # pylint: disable=protected-access
+    return self._joint_ranges
+
   def tracked_positions(self, physics):
     """World positions [m, 3] a camera should keep in view."""
     return np.array([w.torso_position(physics) for w in self._walkers])
@@ -199,7 +208,9 @@ class CoopTask(composer.Task):
         [w.root_body for w in self._walkers]).element_id)
     self._actuator_ids = np.array(physics.bind(
         [a for w in self._walkers for a in w.actuators]).element_id)
-    self._proprioception = None  # Built on first use, once walkers bound.
+    # Built on first use, once the walkers' own after_compile has run.
+    self._proprioception = None
+    self._joint_ranges = None
 
   def initialize_episode(self, physics, random_state):
     self._reset_bookkeeping()

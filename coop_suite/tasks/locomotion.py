@@ -90,8 +90,9 @@ class _Locomotion(base.CoopTask):
                          or self.walker.upright(physics) < 0.0)
 
   def _reward_terms(self, physics):
-    terms = rewards.locomotion_terms(self._walkers, physics,
-                                     self._last_actions, self._config)
+    terms = rewards.locomotion_terms(self.features(physics, ("proprio",)),
+                                     self._last_actions, self.joint_ranges,
+                                     self._config)
     terms.update(self._command_terms(physics))
     return terms
 

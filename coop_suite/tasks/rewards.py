@@ -40,15 +40,17 @@ def velocity_tracking(scale, velocity_xy, command_xy, min_speed=0.05):
   """
   velocity_xy = np.asarray(velocity_xy, dtype=np.float64)
   command_xy = np.asarray(command_xy, dtype=np.float64)
-  speed = np.linalg.norm(command_xy, axis=-1)
+  vx, vy = velocity_xy[..., 0], velocity_xy[..., 1]
+  cx, cy = command_xy[..., 0], command_xy[..., 1]
+  speed = np.sqrt(cx * cx + cy * cy)
   safe = np.maximum(speed, min_speed)
-  ratio = np.sum(velocity_xy * command_xy, -1) / safe**2
+  ratio = (vx * cx + vy * cy) / safe**2
   tracking = np.minimum(ratio, 2.0 - ratio)
-  still = 1.0 - np.minimum(np.linalg.norm(velocity_xy, axis=-1) / 0.5, 1.0)
+  still = 1.0 - np.minimum(np.sqrt(vx * vx + vy * vy) / 0.5, 1.0)
   return scale * np.where(speed >= min_speed, tracking, still)
 
 
-def locomotion_terms(walkers, physics, actions, config):
+def locomotion_terms(proprio, actions, joint_ranges, config):
   """The lower layer's shared terms (alive, up, action/energy/limit costs).
 
   Follows Isaac Gym's Ant, which the paper's tables come from: the up bonus
@@ -57,19 +59,26 @@ def locomotion_terms(walkers, physics, actions, config):
   "at its limit" beyond 99% of its half-range. Costs are returned negative.
 
   Args:
-    walkers: the Ants, one per agent.
-    physics: the physics.
+    proprio: the agents' proprioception, 'proprio/<name>' -> [n, dim], as
+      `CoopTask.features(physics, ('proprio',))` returns it (computed once
+      per state, shared with the observation): joint positions and
+      velocities, and gravity in the torso frame, whose z is the cosine
+      between the torso's z axis and the world's.
     actions: [n_agents, 8] last actions.
+    joint_ranges: [n_agents, 8, 2] joint limits (rad), `CoopTask.joint_ranges`.
     config: an object with fields alive_bonus, up_bonus, action_cost,
       energy_cost, joint_limit_cost.
   Returns:
     dict of term name -> [n_agents] array.
   """
   actions = np.asarray(actions, dtype=np.float64)
-  upright = np.array([w.upright(physics) for w in walkers])
-  joint_vel = np.array([w.joint_velocities(physics) for w in walkers])
-  at_limit = np.array([w.joints_at_limit(physics) for w in walkers])
-  n = len(walkers)
+  upright = proprio["proprio/gravity"][:, 2]
+  joint_vel = proprio["proprio/joints_vel"]
+  low, high = joint_ranges[..., 0], joint_ranges[..., 1]
+  centre, half = (high + low) / 2, (high - low) / 2
+  at_limit = np.sum(np.abs(proprio["proprio/joints_pos"] - centre)
+                    > 0.99 * half, axis=-1)
+  n = len(actions)
   return {
       "alive": np.full(n, config.alive_bonus),
       "up": np.where(upright > 0.93, config.up_bonus, 0.0),
