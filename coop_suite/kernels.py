@@ -63,6 +63,13 @@ def mujoco_pointers(physics):
 
 
 @numba.njit(cache=True)
+def _to_heading(cos, sin, dx, dy):
+  """A world-frame offset (dx, dy) seen in a heading frame (rotated by -yaw):
+  (cos dx + sin dy, cos dy - sin dx)."""
+  return cos * dx + sin * dy, cos * dy - sin * dx
+
+
+@numba.njit(cache=True)
 def heading_frames(xpos, xmat, bodies):
   """Positions and headings of `bodies`: [n, 5] = x, y, z, cos, sin.
 
@@ -132,8 +139,8 @@ def nearest_teammates(frames, k, out, column):
 
   `frames` is `heading_frames`' [n, 5]. Columns: 2k heading-frame offsets
   (nearest first, zero padding), then k mask values (1 real, 0 padding).
-  Offsets to j from i: d = xy[j] - xy[i], then (cos d_x + sin d_y,
-  cos d_y - sin d_x) with agent i's heading. Ties keep the lower index.
+  Offsets to j from i: d = xy[j] - xy[i], then `_to_heading` with agent i's
+  heading. Ties keep the lower index.
   """
   n = frames.shape[0]
   dist2 = np.empty(n)
@@ -155,9 +162,8 @@ def nearest_teammates(frames, k, out, column):
         out[i, column + 2 * slot + 1] = 0.0
         out[i, column + 2 * k + slot] = 0.0
         continue
-      dx, dy = frames[best, 0] - xi, frames[best, 1] - yi
-      out[i, column + 2 * slot] = cos * dx + sin * dy
-      out[i, column + 2 * slot + 1] = cos * dy - sin * dx
+      out[i, column + 2 * slot], out[i, column + 2 * slot + 1] = _to_heading(
+          cos, sin, frames[best, 0] - xi, frames[best, 1] - yi)
       out[i, column + 2 * k + slot] = 1.0
       dist2[best] = -1.0  # Taken.
 
@@ -219,8 +225,8 @@ def heading_offsets(frames, world_xy):
   """Offsets from each agent to world points, in its heading frame.
 
   `world_xy` is [m, 2] (the same m points for every agent) or [n, m, 2] (m
-  points per agent); returns [n, m, 2]: d = p - xy, then (cos d_x + sin d_y,
-  cos d_y - sin d_x) with the agent's heading.
+  points per agent); returns [n, m, 2]: d = p - xy, then `_to_heading` with
+  the agent's heading.
   """
   n = frames.shape[0]
   m = world_xy.shape[-2]
@@ -232,6 +238,5 @@ def heading_offsets(frames, world_xy):
         dx, dy = world_xy[j, 0] - x, world_xy[j, 1] - y
       else:
         dx, dy = world_xy[i, j, 0] - x, world_xy[i, j, 1] - y
-      out[i, j, 0] = cos * dx + sin * dy
-      out[i, j, 1] = cos * dy - sin * dx
+      out[i, j, 0], out[i, j, 1] = _to_heading(cos, sin, dx, dy)
   return out
