@@ -151,6 +151,7 @@ class CoopEnvironment(composer.Environment):
     self._action_bounds = None  # (shape, minimum, maximum), on first use.
     self._substeps = None  # A _SubstepRunner, set at each reset.
     self._fuse = False  # Whether substeps run as one call; set at reset.
+    self._time_up_at = None  # Physics time that ends the episode; at reset.
 
   def _make_observation_updater(self):
     return _LeanUpdater(self._task.observables,
@@ -172,6 +173,9 @@ class CoopEnvironment(composer.Environment):
     # Hooks, observables and the physics are fixed once an episode starts.
     self._fuse = self._can_fuse_substeps()
     self._substeps = _SubstepRunner.make(self._physics)
+    # Half a physics step of slack: summing 0.01 s steps in floating point
+    # reaches 9.99999 after 10 s, which would add one step to the episode.
+    self._time_up_at = self._time_limit - 0.5 * self._physics.timestep()
     return timestep
 
   def step(self, action, observe=True):
@@ -229,10 +233,7 @@ class CoopEnvironment(composer.Environment):
     else:
       reward = self._task.get_reward(self._physics_proxy)
       discount = self._task.get_discount(self._physics_proxy)
-      # Half a physics step of slack: summing 0.01 s steps in floating point
-      # reaches 9.99999 after 10 s, which would add one step to the episode.
-      time_up = self._physics.time() >= (
-          self._time_limit - 0.5 * self._physics.timestep())
+      time_up = self._physics.data.time >= self._time_up_at
       terminating = (self._task.should_terminate_episode(self._physics_proxy)
                      or time_up)
     observation = (self._observation_updater.get_observation()

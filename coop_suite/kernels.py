@@ -32,13 +32,16 @@ PROPRIO_LAYOUT = (("joints_pos", 8), ("joints_vel", 8), ("torso_height", 1),
 PROPRIO_SIZE = sum(size for _, size in PROPRIO_LAYOUT)
 
 
-def _declare_multi_ray():
-  """MuJoCo's `mj_multiRay`, callable from the kernels.
+def _declare_ray_geom():
+  """MuJoCo's `mju_rayGeom` (one ray against one primitive geom), callable
+  from the kernels.
 
   The mujoco package ships its shared library beside its bindings; loading
   it into LLVM's symbol table lets compiled code call it by name, which (unlike
   a ctypes pointer) survives numba's on-disk cache. Pointers are passed as
-  integers, which the C ABI passes like pointers.
+  integers, which the C ABI passes like pointers. The last argument (an
+  optional surface normal, NULL here) is absent in older MuJoCo versions,
+  where the C calling convention ignores it.
   """
   folder = os.path.dirname(mujoco.__file__)
   paths = sorted(glob.glob(os.path.join(folder, "libmujoco.so*"))
@@ -48,25 +51,61 @@ def _declare_multi_ray():
     raise ImportError(f"MuJoCo's shared library was not found in {folder}.")
   llvm.load_library_permanently(paths[0])
   ptr = numba.types.intp
-  return numba.types.ExternalFunction("mj_multiRay", numba.types.void(
-      ptr, ptr, ptr, ptr, ptr, numba.types.uint8, numba.types.int32, ptr, ptr,
-      ptr, numba.types.int32, numba.types.float64))
+  return numba.types.ExternalFunction("mju_rayGeom", numba.types.float64(
+      ptr, ptr, ptr, ptr, ptr, numba.types.int32, ptr))
 
 
-_mj_multi_ray = _declare_multi_ray()
-
-
-def mujoco_pointers(physics):
-  """The addresses of `physics`' mjModel and mjData, for kernels that call
-  MuJoCo (mujoco's bindings expose them as `_address`)."""
-  return physics.model.ptr._address, physics.data.ptr._address  # pylint: disable=protected-access
+_mju_ray_geom = _declare_ray_geom()
 
 
 @numba.njit(cache=True)
-def _to_heading(cos, sin, dx, dy):
+def to_heading(cos, sin, dx, dy):
   """A world-frame offset (dx, dy) seen in a heading frame (rotated by -yaw):
   (cos dx + sin dy, cos dy - sin dx)."""
   return cos * dx + sin * dy, cos * dy - sin * dx
+
+
+@numba.njit(cache=True)
+def _write_frame(xpos, xmat, b, out, i, col):
+  """Body b's x, y, z, cos, sin into out[i, col:col + 5] (`heading_frames`)."""
+  out[i, col] = xpos[b, 0]
+  out[i, col + 1] = xpos[b, 1]
+  out[i, col + 2] = xpos[b, 2]
+  cos, sin = xmat[b, 0], xmat[b, 3]
+  norm = math.hypot(cos, sin)
+  if norm == 0.0:
+    norm = 1.0
+  out[i, col + 3] = cos / norm
+  out[i, col + 4] = sin / norm
+
+
+@numba.njit(cache=True)
+def _write_proprioception(xpos, xmat, qpos, qvel, b, qpos_adr, dof_adr, free,
+                          prev_action, out, i, col):
+  """One Ant's proprioception into out[i, col:col + PROPRIO_SIZE]
+  (`proprioception`); qpos_adr, dof_adr and prev_action are its rows."""
+  joints = qpos_adr.shape[0]
+  for j in range(joints):
+    out[i, col + j] = qpos[qpos_adr[j]]
+  col += joints
+  for j in range(joints):
+    out[i, col + j] = qvel[dof_adr[j]]
+  col += joints
+  out[i, col] = xpos[b, 2]
+  col += 1
+  for j in range(3):
+    out[i, col + j] = xmat[b, 6 + j]
+  col += 3
+  v0, v1, v2 = qvel[free], qvel[free + 1], qvel[free + 2]
+  for j in range(3):
+    out[i, col + j] = v0 * xmat[b, j] + v1 * xmat[b, 3 + j] + v2 * xmat[
+        b, 6 + j]
+  col += 3
+  for j in range(3):
+    out[i, col + j] = qvel[free + 3 + j]
+  col += 3
+  for j in range(prev_action.shape[0]):
+    out[i, col + j] = prev_action[j]
 
 
 @numba.njit(cache=True)
@@ -79,16 +118,7 @@ def heading_frames(xpos, xmat, bodies):
   n = bodies.shape[0]
   out = np.empty((n, 5))
   for i in range(n):
-    b = bodies[i]
-    out[i, 0] = xpos[b, 0]
-    out[i, 1] = xpos[b, 1]
-    out[i, 2] = xpos[b, 2]
-    cos, sin = xmat[b, 0], xmat[b, 3]
-    norm = math.hypot(cos, sin)
-    if norm == 0.0:
-      norm = 1.0
-    out[i, 3] = cos / norm
-    out[i, 4] = sin / norm
+    _write_frame(xpos, xmat, bodies[i], out, i, 0)
   return out
 
 
@@ -104,32 +134,25 @@ def proprioception(xpos, xmat, qpos, qvel, torso, qpos_adr, dof_adr, free_adr,
   local) angular velocity, prev_action = the last action.
   """
   n = torso.shape[0]
-  joints = qpos_adr.shape[1]
   out = np.empty((n, PROPRIO_SIZE))
   for i in range(n):
-    b, free = torso[i], free_adr[i]
-    col = 0
-    for j in range(joints):
-      out[i, col + j] = qpos[qpos_adr[i, j]]
-    col += joints
-    for j in range(joints):
-      out[i, col + j] = qvel[dof_adr[i, j]]
-    col += joints
-    out[i, col] = xpos[b, 2]
-    col += 1
-    for j in range(3):
-      out[i, col + j] = xmat[b, 6 + j]
-    col += 3
-    v0, v1, v2 = qvel[free], qvel[free + 1], qvel[free + 2]
-    for j in range(3):
-      out[i, col + j] = v0 * xmat[b, j] + v1 * xmat[b, 3 + j] + v2 * xmat[
-          b, 6 + j]
-    col += 3
-    for j in range(3):
-      out[i, col + j] = qvel[free + 3 + j]
-    col += 3
-    for j in range(prev_action.shape[1]):
-      out[i, col + j] = prev_action[i, j]
+    _write_proprioception(xpos, xmat, qpos, qvel, torso[i], qpos_adr[i],
+                          dof_adr[i], free_adr[i], prev_action[i], out, i, 0)
+  return out
+
+
+@numba.njit(cache=True)
+def agent_state(xpos, xmat, qpos, qvel, torso, qpos_adr, dof_adr, free_adr,
+                prev_action):
+  """`heading_frames` of the torsos and `proprioception` side by side,
+  [n, 5 + PROPRIO_SIZE]: what every task reads at every control step, in
+  one call."""
+  n = torso.shape[0]
+  out = np.empty((n, 5 + PROPRIO_SIZE))
+  for i in range(n):
+    _write_frame(xpos, xmat, torso[i], out, i, 0)
+    _write_proprioception(xpos, xmat, qpos, qvel, torso[i], qpos_adr[i],
+                          dof_adr[i], free_adr[i], prev_action[i], out, i, 5)
   return out
 
 
@@ -139,7 +162,7 @@ def nearest_teammates(frames, k, out, column):
 
   `frames` is `heading_frames`' [n, 5]. Columns: 2k heading-frame offsets
   (nearest first, zero padding), then k mask values (1 real, 0 padding).
-  Offsets to j from i: d = xy[j] - xy[i], then `_to_heading` with agent i's
+  Offsets to j from i: d = xy[j] - xy[i], then `to_heading` with agent i's
   heading. Ties keep the lower index.
   """
   n = frames.shape[0]
@@ -162,48 +185,64 @@ def nearest_teammates(frames, k, out, column):
         out[i, column + 2 * slot + 1] = 0.0
         out[i, column + 2 * k + slot] = 0.0
         continue
-      out[i, column + 2 * slot], out[i, column + 2 * slot + 1] = _to_heading(
+      out[i, column + 2 * slot], out[i, column + 2 * slot + 1] = to_heading(
           cos, sin, frames[best, 0] - xi, frames[best, 1] - yi)
       out[i, column + 2 * k + slot] = 1.0
       dist2[best] = -1.0  # Taken.
 
 
 @numba.njit(cache=True)
-def terrain_heights(model_ptr, data_ptr, frames, local_dirs, scale, group,
-                    origin_height, no_hit, out, column):
-  """Writes ray-cast terrain heights into out[:, column:column + m].
-
-  Per agent one `mj_multiRay` from (x, y, origin_height) along the m
-  `local_dirs` ([m, 3], heading frame) rotated by its yaw: (c lx - s ly,
-  s lx + c ly, lz). Height = origin_height - dist / scale, `no_hit` where
-  nothing is hit (dist < 0), never below `no_hit`.
-  """
-  n, m = frames.shape[0], local_dirs.shape[0]
-  origin = np.empty(3)
-  dirs = np.empty((m, 3))
-  dist = np.empty(m)
-  geom_id = np.empty(m, dtype=np.int32)
-  for i in range(n):
-    cos, sin = frames[i, 3], frames[i, 4]
-    for r in range(m):
-      lx, ly = local_dirs[r, 0], local_dirs[r, 1]
-      dirs[r, 0] = cos * lx - sin * ly
-      dirs[r, 1] = sin * lx + cos * ly
-      dirs[r, 2] = local_dirs[r, 2]
-    origin[0], origin[1], origin[2] = frames[i, 0], frames[i, 1], origin_height
-    _mj_multi_ray(model_ptr, data_ptr, origin.ctypes.data, dirs.ctypes.data,
-                  group.ctypes.data, 1, -1, geom_id.ctypes.data,
-                  dist.ctypes.data, 0, m, 100.0)
-    for r in range(m):
-      if dist[r] < 0:
-        out[i, column + r] = no_hit
-      else:
-        out[i, column + r] = max(origin_height - dist[r] / scale[r], no_hit)
+def nearest_hit(geom_xpos, geom_xmat, geom_size, geom_type, candidates,
+                origin, direction):
+  """Distance along one ray to the nearest of the `candidates` geoms, -1 if
+  it meets none: what `mj_ray` returns with those geoms left after its
+  filters (the same `mju_rayGeom` per geom, the same minimum)."""
+  nearest = -1.0
+  for g in candidates:
+    dist = _mju_ray_geom(geom_xpos.ctypes.data + 24 * g,
+                         geom_xmat.ctypes.data + 72 * g,
+                         geom_size.ctypes.data + 24 * g, origin.ctypes.data,
+                         direction.ctypes.data, geom_type[g], 0)
+    if dist >= 0 and (dist < nearest or nearest < 0):
+      nearest = dist
+  return nearest
 
 
 @numba.njit(cache=True)
-def shared_exteroception(model_ptr, data_ptr, frames, k, local_dirs, scale,
-                         group, origin_height, no_hit):
+def terrain_heights(geom_xpos, geom_xmat, geom_size, geom_type, candidates,
+                    frames, local_dirs, scale, origin_height, no_hit, out,
+                    column):
+  """Writes ray-cast terrain heights into out[:, column:column + m].
+
+  Per agent m rays from (x, y, origin_height) along the `local_dirs` ([m, 3],
+  heading frame) rotated by its yaw: (c lx - s ly, s lx + c ly, lz), each
+  against the `candidates` geoms (`nearest_hit`). Height = origin_height -
+  dist / scale, `no_hit` where nothing is hit (dist < 0), never below
+  `no_hit`.
+  """
+  n, m = frames.shape[0], local_dirs.shape[0]
+  origin = np.empty(3)
+  direction = np.empty(3)
+  for i in range(n):
+    cos, sin = frames[i, 3], frames[i, 4]
+    origin[0], origin[1], origin[2] = frames[i, 0], frames[i, 1], origin_height
+    for r in range(m):
+      lx, ly = local_dirs[r, 0], local_dirs[r, 1]
+      direction[0] = cos * lx - sin * ly
+      direction[1] = sin * lx + cos * ly
+      direction[2] = local_dirs[r, 2]
+      dist = nearest_hit(geom_xpos, geom_xmat, geom_size, geom_type,
+                         candidates, origin, direction)
+      if dist < 0:
+        out[i, column + r] = no_hit
+      else:
+        out[i, column + r] = max(origin_height - dist / scale[r], no_hit)
+
+
+@numba.njit(cache=True)
+def shared_exteroception(frames, k, geom_xpos, geom_xmat, geom_size,
+                         geom_type, candidates, local_dirs, scale,
+                         origin_height, no_hit):
   """Features every cooperative task shows each agent, [n, 4 + 3k + m]:
   self_pose (x, y, cos, sin), `nearest_teammates` (2k offsets, k mask) and
   `terrain_heights` (m samples), in one call."""
@@ -215,8 +254,9 @@ def shared_exteroception(model_ptr, data_ptr, frames, k, local_dirs, scale,
     out[i, 2] = frames[i, 3]
     out[i, 3] = frames[i, 4]
   nearest_teammates(frames, k, out, 4)
-  terrain_heights(model_ptr, data_ptr, frames, local_dirs, scale, group,
-                  origin_height, no_hit, out, 4 + 3 * k)
+  terrain_heights(geom_xpos, geom_xmat, geom_size, geom_type, candidates,
+                  frames, local_dirs, scale, origin_height, no_hit, out,
+                  4 + 3 * k)
   return out
 
 
@@ -225,7 +265,7 @@ def heading_offsets(frames, world_xy):
   """Offsets from each agent to world points, in its heading frame.
 
   `world_xy` is [m, 2] (the same m points for every agent) or [n, m, 2] (m
-  points per agent); returns [n, m, 2]: d = p - xy, then `_to_heading` with
+  points per agent); returns [n, m, 2]: d = p - xy, then `to_heading` with
   the agent's heading.
   """
   n = frames.shape[0]
@@ -238,5 +278,5 @@ def heading_offsets(frames, world_xy):
         dx, dy = world_xy[j, 0] - x, world_xy[j, 1] - y
       else:
         dx, dy = world_xy[i, j, 0] - x, world_xy[i, j, 1] - y
-      out[i, j, 0], out[i, j, 1] = _to_heading(cos, sin, dx, dy)
+      out[i, j, 0], out[i, j, 1] = to_heading(cos, sin, dx, dy)
   return out

@@ -89,14 +89,25 @@ def test_nearest_teammates_match_numpy(n, k):
   np.testing.assert_array_equal(mask, np.arange(k)[None].repeat(n, 0) < m)
 
 
-def test_heights_match_mujoco_rays_over_the_ravine():
-  """Bit-identical to one `mujoco.mj_multiRay` call per agent, on terrain
-  with a trench and a stone (pushers stand inside the trench)."""
+@pytest.mark.parametrize("task,options", [
+    ("ravine", {}), ("transport", {}), ("corridor", {}),
+    ("ravine", {"stage": "crossers"})])
+def test_heights_match_mujoco_multi_ray(task, options):
+  """Bit-identical to one `mujoco.mj_multiRay` per agent over every geom of
+  the model, on terrain with a trench and a stone (pushers stand inside the
+  trench), a cylinder, walls."""
   sampler = observables.HeightSampler(3, 0.6)
-  local_dirs, scale, group, origin_height, no_hit = sampler.ray_args
-  saw_trench = False
-  for env in _states("ravine", 2, steps=10):
-    frames = env.task.frames(env.physics)
+  local_dirs, scale, origin_height, no_hit = sampler.ray_args
+  saw_relief = False
+  rng = np.random.RandomState(2)
+  for env in _states(task, 4, steps=10, **options):
+    # The agents, and more viewpoints on and around the task's objects.
+    real = env.task.frames(env.physics)
+    points = env.task.tracked_positions(env.physics)
+    points = np.concatenate([real.position, points + rng.uniform(
+        -0.8, 0.8, points.shape)])
+    yaw = rng.uniform(-np.pi, np.pi, len(points))
+    frames = observables.AgentFrames(points, np.cos(yaw), np.sin(yaw))
     got = sampler(env.physics, frames)
     for i in range(len(frames.cos)):
       c, s = frames.cos[i], frames.sin[i]
@@ -105,14 +116,24 @@ def test_heights_match_mujoco_rays_over_the_ravine():
       origin = np.array([*frames.position[i, :2], origin_height])
       dist = np.empty(len(local_dirs))
       mujoco.mj_multiRay(env.physics.model.ptr, env.physics.data.ptr, origin,
-                         dirs.ravel(), group, 1, -1,
+                         dirs.ravel(), sampler.geom_group, 1, -1,
                          np.zeros(len(dist), np.int32), dist, None, len(dist),
                          100.0)
       expected = np.where(dist >= 0, np.maximum(
           origin_height - dist / scale, no_hit), no_hit)
       np.testing.assert_array_equal(got[i], expected)
-    saw_trench |= bool(np.any(got < -0.5))
-  assert saw_trench, "no ray reached the trench floor: test not exercised"
+    saw_relief |= bool(np.any(np.abs(got) > 0.3))
+  assert saw_relief, "no ray met a trench, prop or wall: test not exercised"
+
+
+def test_heights_refuse_terrain_they_cannot_ray_cast():
+  model = mujoco.MjModel.from_xml_string("""
+      <mujoco><asset><hfield name="h" nrow="3" ncol="3" size="1 1 1 1"/>
+      </asset><worldbody><geom name="hills" type="hfield" hfield="h"/>
+      </worldbody></mujoco>""")
+  sampler = observables.HeightSampler(3, 0.6)
+  with pytest.raises(ValueError, match="hills.*HFIELD.*primitive"):
+    observables.terrain_geoms(model, sampler.geom_group)
 
 
 def test_heading_offsets_match_numpy_and_check_shapes():

@@ -190,13 +190,28 @@ class ProprioceptionReader:
       columns[name] = slice(start, start + size)
       start += size
     self._columns = tuple(columns.items())
+    self._bound = (None, None)  # (an mjData, views of its arrays).
+
+  def state(self, physics, prev_actions):
+    """Every Ant's torso frame and proprioception, [n, 5 + PROPRIO_SIZE]:
+    x, y, z, cos(yaw), sin(yaw) (`kernels.heading_frames`), then the
+    proprioception in `kernels.PROPRIO_LAYOUT` order (`split` names it)."""
+    data = physics.data.ptr
+    if self._bound[0] is not data:  # Views into this mjData, kept with it.
+      self._bound = (data, (data.xpos, data.xmat, data.qpos, data.qvel))
+    return kernels.agent_state(*self._bound[1], self._torso, self._qpos,
+                               self._dof, self._free, prev_actions)
+
+  def split(self, state, prefix=""):
+    """The proprioception columns of `state`, named: prefix + name -> [n, d]
+    (views)."""
+    proprio = state[:, 5:]
+    return {prefix + name: proprio[:, columns]
+            for name, columns in self._columns}
 
   def __call__(self, physics, prev_actions):
-    data = physics.data
-    packed = kernels.proprioception(
-        data.xpos, data.xmat, data.qpos, data.qvel, self._torso, self._qpos,
-        self._dof, self._free, np.asarray(prev_actions, dtype=np.float64))
-    return {name: packed[:, columns] for name, columns in self._columns}
+    return self.split(self.state(
+        physics, np.asarray(prev_actions, dtype=np.float64)))
 
 
 PROPRIOCEPTION_KEYS = tuple(name for name, _ in kernels.PROPRIO_LAYOUT)

@@ -37,6 +37,11 @@ class _FreeProp(composer.Entity):
   def after_compile(self, physics, random_state):
     self._body_id = int(physics.bind(self._body).element_id)
 
+  @property
+  def body_id(self):
+    """The body's id in the compiled model (after compilation)."""
+    return self._body_id
+
   def position(self, physics):
     """Centre of the body, shape [3], world frame (metres)."""
     return physics.data.xpos[self._body_id]

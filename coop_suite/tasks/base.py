@@ -157,8 +157,9 @@ class CoopTask(composer.Task):
                "failure": bool(self._failure),
                "return": float(np.mean(self._return)),
                "control_steps": self._steps}
-    for term, total in self._term_sums.items():
-      metrics[f"reward/{term}"] = float(np.mean(total))
+    if self._term_sums is not None:
+      for term, total in zip(self._term_names, self._term_sums):
+        metrics[f"reward/{term}"] = float(np.mean(total))
     metrics.update(self._progress(physics))
     return metrics
 
@@ -234,11 +235,14 @@ class CoopTask(composer.Task):
 
   def get_reward(self, physics):
     terms = self._reward_terms(physics)
-    total = np.zeros(self.n_agents)
-    sums = self._term_sums
-    for term, value in terms.items():
-      sums[term] = sums.get(term, 0.0) + value
-      total += value
+    # One [terms, n] array: the sums and the total in two numpy calls (the
+    # same sums, in the same order, as adding the terms one by one).
+    values = np.array(tuple(terms.values()))
+    if self._term_sums is None:
+      self._term_names = tuple(terms)
+      self._term_sums = np.zeros_like(values)
+    self._term_sums += values
+    total = values.sum(axis=0)
     self._return += total
     return list(total.astype(np.float32))
 
@@ -267,8 +271,24 @@ class CoopTask(composer.Task):
   def frames(self, physics):
     """Every agent's torso position and heading (`AgentFrames`), computed
     once per physics state."""
-    return self.per_state("frames", physics, lambda: extero.AgentFrames
-                          .from_bodies(physics, self._torso_ids))
+    return self._agent_state(physics)[0]
+
+  def _agent_state(self, physics):
+    """(`AgentFrames`, packed [n, 5 + proprioception]) of this physics
+    state: both from one compiled call (`ProprioceptionReader.state`), since
+    every step reads the frames (status, rewards) and, to act, the
+    proprioception."""
+    cache = self._per_state_cache(physics)
+    try:
+      return cache["agent_state"]
+    except KeyError:
+      pass
+    if self._proprioception is None:
+      self._proprioception = ant_lib.ProprioceptionReader(self._walkers)
+    state = self._proprioception.state(physics, self._last_actions)
+    value = cache["agent_state"] = (extero.AgentFrames.from_packed(state),
+                                    state)
+    return value
 
   def features(self, physics, groups=FEATURE_GROUPS):
     """Observations of every agent: 'group/name' -> [n_agents, dim].
@@ -302,10 +322,9 @@ class CoopTask(composer.Task):
   def _compute_group(self, group, physics, frames):
     """One group's features: 'group/name' -> [n_agents, dim]."""
     if group == "proprio":
-      if self._proprioception is None:
-        self._proprioception = ant_lib.ProprioceptionReader(self._walkers)
-      values = self._proprioception(physics, self._last_actions)
-    elif group == "extero":
+      return self._proprioception.split(self._agent_state(physics)[1],
+                                        "proprio/")
+    if group == "extero":
       values = dict(self._exteroception(physics, frames))
       if self.SHARED_EXTERO:
         values.update(self._shared_exteroception(physics, frames))
@@ -384,7 +403,8 @@ class CoopTask(composer.Task):
     self._failure = False
     self._steps = 0
     self._return = np.zeros(self.n_agents)
-    self._term_sums = {}
+    self._term_names = ()
+    self._term_sums = None  # [terms, n_agents], from the first reward on.
     self._state_version += 1
 
   def _build_agent_observables(self, index):
@@ -408,7 +428,7 @@ class CoopTask(composer.Task):
     one compiled call."""
     k = self._config.k_neighbours
     shared = kernels.shared_exteroception(
-        *kernels.mujoco_pointers(physics), frames.as_packed(), k,
+        frames.as_packed(), k, *self._heights.geom_args(physics),
         *self._heights.ray_args)
     return {
         "self_pose": shared[:, :4],

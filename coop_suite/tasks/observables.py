@@ -12,6 +12,7 @@ depend on the number of agents, so one policy runs in any population.
 
 import typing
 
+import mujoco
 import numpy as np
 
 from coop_suite.arenas import TERRAIN_GROUP
@@ -43,9 +44,14 @@ class AgentFrames(typing.NamedTuple):
   @classmethod
   def from_bodies(cls, physics, body_ids):
     """Frames of the bodies `body_ids` (the agents' torsos)."""
-    packed = kernels.heading_frames(physics.data.xpos, physics.data.xmat,
-                                    body_ids)
-    return cls(packed[:, :3], packed[:, 3], packed[:, 4], packed)
+    return cls.from_packed(kernels.heading_frames(
+        physics.data.xpos, physics.data.xmat, body_ids))
+
+  @classmethod
+  def from_packed(cls, packed):
+    """Frames that view the first five columns of `packed` ([n, >= 5]: x, y,
+    z, cos, sin, e.g. `kernels.heading_frames` or `kernels.agent_state`)."""
+    return cls(packed[:, :3], packed[:, 3], packed[:, 4], packed[:, :5])
 
   def as_packed(self):
     """The [n, 5] array the kernels read, built if the frames lack one."""
@@ -104,6 +110,11 @@ class HeightSampler:
   `spacing` metres between samples, row-major from back-right to front-left.
   Each value is the world z (m) of the first terrain or prop surface a ray
   meets on its way down; Ants are invisible to the rays (geom group 1).
+
+  The rays are cast against the terrain geoms only, found once per model
+  with `mj_ray`'s own filters (`terrain_geoms`): the same distances as
+  `mj_multiRay` (bit for bit, `tests/test_kernels.py`) without its pass over
+  every geom of every Ant, which cost more than all other features together.
   """
 
   def __init__(self, grid, spacing):
@@ -119,20 +130,70 @@ class HeightSampler:
     self._local_dirs = rays / np.linalg.norm(rays, axis=1, keepdims=True)
     self._group = np.zeros(6, dtype=np.uint8)
     self._group[TERRAIN_GROUP] = 1
+    self._bound = (None, None)  # (the mjData, its geom arguments).
 
   @property
   def size(self):
     return self._num
 
   @property
+  def geom_group(self):
+    """The `geomgroup` mask of `mj_ray` that selects the terrain."""
+    return self._group
+
+  @property
   def ray_args(self):
-    """The arguments of `kernels.terrain_heights` that follow `frames`."""
-    return (self._local_dirs, self._scale, self._group, _RAY_ORIGIN_HEIGHT,
-            _NO_HIT_HEIGHT)
+    """The rays' arguments of `kernels.terrain_heights` (after `geom_args`
+    and `frames`): directions, scales, origin height, no-hit height."""
+    return (self._local_dirs, self._scale, _RAY_ORIGIN_HEIGHT, _NO_HIT_HEIGHT)
+
+  def geom_args(self, physics):
+    """The geoms' arguments of `kernels.terrain_heights`: MuJoCo's geom
+    arrays of `physics` and the terrain geoms' ids (`terrain_geoms`)."""
+    data = physics.data.ptr
+    if self._bound[0] is not data:  # Views into this mjData, kept with it.
+      model = physics.model.ptr
+      self._bound = (data, (data.geom_xpos, data.geom_xmat, model.geom_size,
+                            model.geom_type.astype(np.int32),
+                            terrain_geoms(model, self._group)))
+    return self._bound[1]
 
   def __call__(self, physics, frames):
     """Returns [n, grid * grid] heights (m, world z)."""
     out = np.empty((len(frames.cos), self._num))
-    kernels.terrain_heights(*kernels.mujoco_pointers(physics),
-                            frames.as_packed(), *self.ray_args, out, 0)
+    kernels.terrain_heights(*self.geom_args(physics), frames.as_packed(),
+                            *self.ray_args, out, 0)
     return out
+
+
+# Geom types `mju_rayGeom` handles; meshes, height fields and SDFs need
+# MuJoCo's own ray functions.
+_PRIMITIVE_GEOMS = frozenset(int(t) for t in (
+    mujoco.mjtGeom.mjGEOM_PLANE, mujoco.mjtGeom.mjGEOM_SPHERE,
+    mujoco.mjtGeom.mjGEOM_CAPSULE, mujoco.mjtGeom.mjGEOM_ELLIPSOID,
+    mujoco.mjtGeom.mjGEOM_CYLINDER, mujoco.mjtGeom.mjGEOM_BOX))
+
+
+def terrain_geoms(model, geom_group):
+  """Ids of the geoms a ray sees with `mj_ray`'s filters (no excluded body,
+  static geoms included): visible (alpha of the geom, or of its material,
+  above 0) and in a group enabled in `geom_group`.
+
+  Raises:
+    ValueError: if one of them is not a primitive (a mesh, height field or
+      SDF), which the compiled height kernel cannot ray-cast.
+  """
+  alpha = np.where(model.geom_matid >= 0,
+                   model.mat_rgba[np.maximum(model.geom_matid, 0), 3]
+                   if model.nmat else 1.0, model.geom_rgba[:, 3])
+  group = np.clip(model.geom_group, 0, len(geom_group) - 1)
+  ids = np.flatnonzero((alpha != 0) & (geom_group[group] != 0))
+  for g in ids:
+    if int(model.geom_type[g]) not in _PRIMITIVE_GEOMS:
+      name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)
+      raise ValueError(
+          f"Terrain geom {name or g!r} is a "
+          f"{mujoco.mjtGeom(model.geom_type[g]).name}; height samples support "
+          "primitive geoms only (plane, sphere, capsule, ellipsoid, cylinder, "
+          "box).")
+  return ids.astype(np.int64)

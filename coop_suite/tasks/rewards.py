@@ -1,23 +1,35 @@
 """Reward terms from the paper's reward tables, written once for all tasks.
 
-Every function is pure numpy and returns per-agent values, shape [n_agents],
-so tasks only decide which terms to combine and with which coefficient
-(coefficients live in each task's config dataclass).
+Every function returns per-agent values, shape [n_agents], so tasks only
+decide which terms to combine and with which coefficient (coefficients live
+in each task's config dataclass). `inverse_distance` and `planar_norm` are
+numpy ufuncs compiled by numba: they take arrays from Python, and scalars
+inside a task's compiled kernel (see `transport.py`), so a formula is
+written once either way.
 """
 
+import math
+
+import numba
 import numpy as np
 
 
+@numba.vectorize(["float64(float64, float64)"], cache=True)
 def inverse_distance(scale, distance):
   """`scale / (1 + d)`: the paper's shaping term for a distance d (metres)."""
-  return scale / (1.0 + np.asarray(distance, dtype=np.float64))
+  return scale / (1.0 + distance)
+
+
+@numba.vectorize(["float64(float64, float64)"], cache=True)
+def planar_norm(dx, dy):
+  """The length of a planar offset (dx, dy): sqrt(dx^2 + dy^2)."""
+  return math.sqrt(dx * dx + dy * dy)
 
 
 def planar_distance(a_xy, b_xy):
   """Euclidean distance over the last axis of [..., 2] arrays (metres)."""
-  delta = np.subtract(a_xy, b_xy)
-  dx, dy = delta[..., 0], delta[..., 1]
-  return np.sqrt(dx * dx + dy * dy)
+  delta = np.subtract(a_xy, b_xy, dtype=np.float64)
+  return planar_norm(delta[..., 0], delta[..., 1])
 
 
 def velocity_tracking(scale, velocity_xy, command_xy, min_speed=0.05):
