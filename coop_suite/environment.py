@@ -34,6 +34,8 @@ import dm_env
 import mujoco
 import numpy as np
 
+from coop_suite import kernels
+
 
 def _is_plain(observable):
   """Whether composer would compute `observable` once, at the last substep."""
@@ -70,7 +72,7 @@ class _LeanUpdater(updater_lib.Updater):
         names = [src[1] for src in sources[0]]
         if all([(src[1], src[2]) for src in agent] == [(n, i) for n in names]
                for i, agent in enumerate(sources)):
-          self._batch = (owners.pop(), physics, names)
+          self._batch = (owners.pop(), physics, tuple(names))
       self._callables = [
           [(name, enabled.observation_callable)
            for name, enabled in enabled_dict.items()]
@@ -112,7 +114,6 @@ class _SubstepRunner:
   def __init__(self, physics):
     self._model, self._data = physics.model.ptr, physics.data.ptr
     self._warnings = self._data.warning.number  # A live view.
-    self._before = np.empty_like(self._warnings)
 
   @classmethod
   def make(cls, physics):
@@ -123,14 +124,14 @@ class _SubstepRunner:
     return cls(physics)
 
   def step(self, n):
-    model, data = self._model, self._data
-    self._before[:] = self._warnings
+    model, data, warnings = self._model, self._data, self._warnings
+    before = warnings.tobytes()  # Counts only grow: any change is new.
     mujoco.mj_step2(model, data)
     if n > 1:
       mujoco.mj_step(model, data, n - 1)
     mujoco.mj_step1(model, data)
-    new = self._warnings > self._before
-    if new.any():
+    if warnings.tobytes() != before:
+      new = warnings > np.frombuffer(before, dtype=warnings.dtype)
       names = np.compress(new, list(mujoco.mjtWarning.__members__))
       raise control.PhysicsError(
           f"Physics state is invalid. Warning(s) raised: {', '.join(names)}")
@@ -253,18 +254,23 @@ class CoopEnvironment(composer.Environment):
     """
     if self._action_bounds is None:
       specs = self.action_spec()
-      self._action_bounds = ((len(specs),) + specs[0].shape,
-                             specs[0].minimum, specs[0].maximum)
+      shape = specs[0].shape
+      self._action_bounds = (
+          (len(specs),) + shape,
+          np.broadcast_to(specs[0].minimum, shape).astype(np.float64),
+          np.broadcast_to(specs[0].maximum, shape).astype(np.float64))
     shape, low, high = self._action_bounds
     if (type(action) is np.ndarray and action.shape == shape  # pylint: disable=unidiomatic-typecheck
         and action.dtype.kind == "f"):
       # Fast path for the common case: one float array for all agents
-      # (every agent has the Ant's action spec).
-      if not np.isfinite(action).all():
+      # (every agent has the Ant's action spec), checked and clipped in one
+      # compiled call.
+      clipped = kernels.clip_finite(action, low, high)
+      if clipped is None:
         bad = np.flatnonzero(~np.isfinite(action).all(axis=1))
         raise ValueError(f"Actions of agents {bad.tolist()} contain NaN or "
                          "inf.")
-      return np.minimum(np.maximum(action, low), high)
+      return clipped
     specs = self.action_spec()
     n = len(specs)
     if isinstance(action, (str, bytes, dict)) or not hasattr(action, "__len__"):

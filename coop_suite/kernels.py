@@ -32,6 +32,16 @@ PROPRIO_LAYOUT = (("joints_pos", 8), ("joints_vel", 8), ("torso_height", 1),
 PROPRIO_SIZE = sum(size for _, size in PROPRIO_LAYOUT)
 
 
+def proprio_columns(offset=0, prefix=""):
+  """((prefix + name, slice of its columns), ...) in PROPRIO_LAYOUT order,
+  for the proprioception at column `offset` of a packed array."""
+  columns, start = [], offset
+  for name, size in PROPRIO_LAYOUT:
+    columns.append((prefix + name, slice(start, start + size)))
+    start += size
+  return tuple(columns)
+
+
 def _declare_ray_geom():
   """MuJoCo's `mju_rayGeom` (one ray against one primitive geom), callable
   from the kernels.
@@ -106,6 +116,20 @@ def _write_proprioception(xpos, xmat, qpos, qvel, b, qpos_adr, dof_adr, free,
   col += 3
   for j in range(prev_action.shape[0]):
     out[i, col + j] = prev_action[j]
+
+
+@numba.njit(cache=True)
+def clip_finite(values, low, high):
+  """`values` [n, d] clipped to [low[j], high[j]] in column j, as a new
+  float array; None if any value is NaN or infinite."""
+  out = np.empty(values.shape)
+  for i in range(values.shape[0]):
+    for j in range(values.shape[1]):
+      value = values[i, j]
+      if not math.isfinite(value):
+        return None
+      out[i, j] = min(max(value, low[j]), high[j])
+  return out
 
 
 @numba.njit(cache=True)

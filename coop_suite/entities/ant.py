@@ -185,11 +185,7 @@ class ProprioceptionReader:
     self._qpos = np.stack([w._joint_qpos_adr for w in walkers])
     self._dof = np.stack([w._joint_dof_adr for w in walkers])
     self._free = np.array([w._free_dof_adr for w in walkers])
-    columns, start = {}, 0
-    for name, size in kernels.PROPRIO_LAYOUT:
-      columns[name] = slice(start, start + size)
-      start += size
-    self._columns = tuple(columns.items())
+    self._columns = kernels.proprio_columns()
     self._bound = (None, None)  # (an mjData, views of its arrays).
 
   def state(self, physics, prev_actions):

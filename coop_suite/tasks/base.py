@@ -106,9 +106,18 @@ class CoopTask(composer.Task):
     self._heights = extero.HeightSampler(config.height_grid,
                                          config.height_spacing)
     self._checked_groups = set()
+    self._plans = {}  # Observation names -> what `observation_batch` builds.
+    self._last_plan = (None, None)
+    k, m = config.k_neighbours, self._heights.size
+    self._shared_columns = (
+        ("extero/self_pose", slice(0, 4)),
+        ("extero/teammates", slice(4, 4 + 2 * k)),
+        ("extero/teammates_mask", slice(4 + 2 * k, 4 + 3 * k)),
+        ("extero/heights", slice(4 + 3 * k, 4 + 3 * k + m)))
     self._proprioception = None  # See `after_compile`.
     self._joint_ranges = None
     self._state_key = None
+    self._mjdata = None  # The compiled physics' mjData (`after_compile`).
     self._state_cache = {}
     self._state_version = 0
     self._reset_bookkeeping()
@@ -204,11 +213,18 @@ class CoopTask(composer.Task):
 
   def after_compile(self, physics, random_state):
     del random_state  # Unused.
+    self._mjdata = physics.data.ptr
     # Runs before the entities' own after_compile, so bind here.
     self._torso_ids = np.array(physics.bind(
         [w.root_body for w in self._walkers]).element_id)
-    self._actuator_ids = np.array(physics.bind(
+    ids = np.array(physics.bind(
         [a for w in self._walkers for a in w.actuators]).element_id)
+    # Usually consecutive (the Ants are the only actuated entities): a slice
+    # writes the controls without fancy indexing.
+    consecutive = np.array_equal(ids, np.arange(ids[0], ids[0] + len(ids)))
+    first = int(ids[0])
+    self._actuator_ids = (slice(first, first + len(ids)) if consecutive
+                          else ids)
     # Built on first use, once the walkers' own after_compile has run.
     self._proprioception = None
     self._joint_ranges = None
@@ -221,10 +237,11 @@ class CoopTask(composer.Task):
   def before_step(self, physics, action, random_state):
     """Writes every agent's action [n, 8] to the controls in one call (what
     `Ant.apply_action` does per walker; walkers' `prev_action` are rows of
-    `_last_actions`)."""
+    `_last_actions`), into the bound mjData (`physics`' own)."""
+    del physics, random_state  # `self._mjdata` is physics' data.
     self._state_version += 1
     self._last_actions[:] = action
-    physics.data.ctrl[self._actuator_ids] = self._last_actions.ravel()
+    self._mjdata.ctrl[self._actuator_ids] = self._last_actions.ravel()
 
   def after_step(self, physics, random_state):
     self._steps += 1
@@ -247,7 +264,7 @@ class CoopTask(composer.Task):
     return list(total.astype(np.float32))
 
   def get_discount(self, physics):
-    return np.asarray(0.0 if self._ended() else 1.0, dtype=np.float32)
+    return _ZERO if self._ended() else _ONE
 
   def should_terminate_episode(self, physics):
     return self._ended()
@@ -260,13 +277,43 @@ class CoopTask(composer.Task):
   def observation_batch(self, physics, names):
     """Every agent's observation dict of the features `names`.
 
-    The fast path of `CoopEnvironment`: one feature computation, then row
-    views of its [n, dim] arrays. Views are safe: `features` builds new
-    arrays at every physics state.
+    The fast path of `CoopEnvironment`: every agent's arrays are views of
+    the blocks its group computes once per state (`_blocks`), one view per
+    agent and feature and nothing in between. Views are safe: the blocks are
+    new arrays at every physics state.
     """
-    features = self.features(physics)
-    return [{name: features[name][i] for name in names}
-            for i in range(self.n_agents)]
+    if not isinstance(names, tuple):
+      names = tuple(names)
+    groups, wanted = self._observation_plan(names)
+    blocks = []
+    for group in groups:
+      blocks.extend(self._blocks(group, physics))
+    if wanted is not None:  # Some observables disabled: leave them out.
+      blocks = [(values, tuple(c for c in columns if c[0] in wanted))
+                for values, columns in blocks]
+    observations = []
+    for i in range(self.n_agents):
+      agent = {}
+      for values, columns in blocks:
+        for name, where in columns:
+          agent[name] = values[i, where]
+      observations.append(agent)
+    return observations
+
+  def _observation_plan(self, names):
+    """(groups to compute, names to keep or None for all) for `names`."""
+    last_names, plan = self._last_plan
+    if names is last_names:  # The environment asks with the same tuple.
+      return plan
+    plan = self._plans.get(names)
+    if plan is None:
+      groups = tuple(g for g in FEATURE_GROUPS
+                     if any(n.startswith(g + "/") for n in names))
+      every = {name for group in groups for name in self._declared(group)}
+      plan = self._plans[names] = (
+          groups, None if every == set(names) else frozenset(names))
+    self._last_plan = (names, plan)
+    return plan
 
   def frames(self, physics):
     """Every agent's torso position and heading (`AgentFrames`), computed
@@ -295,60 +342,74 @@ class CoopTask(composer.Task):
 
     Args:
       physics: the task's physics.
-      groups: the prefixes to compute ('proprio', 'extero', 'command'); the
-        returned dict may hold other groups computed earlier for the same
-        state. The lower layer reads only 'proprio' at each control step,
-        while the exteroception (ray casts, nearest teammates) is needed only
-        when the upper layer acts, so `CommandWrapper` asks for less.
+      groups: the prefixes to compute ('proprio', 'extero', 'command'). The
+        lower layer reads only 'proprio' at each control step, while the
+        exteroception (ray casts, nearest teammates) is needed only when the
+        upper layer acts, so `CommandWrapper` asks for less.
 
     Each group is computed at most once per physics state and cached, since
-    every agent's observables read from it.
+    every agent's observables read from it; the returned arrays are views.
+    """
+    out = {}
+    for group in groups:
+      for values, columns in self._blocks(group, physics):
+        for name, where in columns:
+          out[name] = values[:, where]
+    return out
+
+  def _blocks(self, group, physics):
+    """One group's features as blocks, computed once per physics state.
+
+    A block is (values [n_agents, d], ((name, columns), ...)): each feature
+    'group/name' is values[:, columns]. Packed kernel outputs are one block
+    each (the proprioception, the shared exteroception), a task's feature
+    dict one block per feature.
     """
     cache = self._per_state_cache(physics)
-    features = cache.get("features")
-    if features is None:
-      features = cache["features"] = {}
-      cache["feature_groups"] = set()
-    done = cache["feature_groups"]
-    for group in groups:
-      if group not in done:
-        values = self._compute_group(group, physics, self.frames(physics))
-        if group not in self._checked_groups:
-          self._check_group(group, values)
-        features.update(values)
-        done.add(group)
-    return features
-
-  def _compute_group(self, group, physics, frames):
-    """One group's features: 'group/name' -> [n_agents, dim]."""
+    try:
+      return cache[group]
+    except KeyError:
+      pass
     if group == "proprio":
-      return self._proprioception.split(self._agent_state(physics)[1],
-                                        "proprio/")
-    if group == "extero":
-      values = dict(self._exteroception(physics, frames))
+      blocks = ((self._agent_state(physics)[1], _PROPRIO_COLUMNS),)
+    elif group == "extero":
+      frames = self.frames(physics)
+      blocks = _as_blocks("extero/", self._exteroception(physics, frames))
       if self.SHARED_EXTERO:
-        values.update(self._shared_exteroception(physics, frames))
+        blocks += ((self._shared_exteroception(physics, frames),
+                    self._shared_columns),)
     elif group == "command":
-      values = self._commands(physics, frames)
+      blocks = _as_blocks("command/",
+                          self._commands(physics, self.frames(physics)))
     else:
       raise ValueError(f"Unknown feature group {group!r}; expected one of "
                        f"{FEATURE_GROUPS}.")
-    return {f"{group}/{name}": value for name, value in values.items()}
+    if group not in self._checked_groups:
+      self._check_group(group, blocks)
+    cache[group] = blocks
+    return blocks
 
-  def _check_group(self, group, values):
+  def _declared(self, group):
+    """The names a group must compute, 'group/name'."""
+    names = {"proprio": ant_lib.PROPRIOCEPTION_KEYS,
+             "extero": self.EXTERO_FEATURES + (
+                 SHARED_EXTERO_FEATURES if self.SHARED_EXTERO else ()),
+             "command": self.COMMAND_FEATURES}[group]
+    return tuple(f"{group}/{name}" for name in names)
+
+  def _check_group(self, group, blocks):
     """Checks a group's names and shapes once, on its first computation."""
-    declared = {"proprio": ant_lib.PROPRIOCEPTION_KEYS,
-                "extero": self.EXTERO_FEATURES + (
-                    SHARED_EXTERO_FEATURES if self.SHARED_EXTERO else ()),
-                "command": self.COMMAND_FEATURES}[group]
-    names = {name.split("/", 1)[1] for name in values}
-    if names != set(declared):
+    names = {name for _, columns in blocks for name, _ in columns}
+    if names != set(self._declared(group)):
       raise RuntimeError(f"{type(self).__name__} computed {group} features "
-                         f"{sorted(names)}, declared {sorted(declared)}.")
-    for name, value in values.items():
-      if np.ndim(value) != 2 or len(value) != self.n_agents:
-        raise RuntimeError(f"Feature {name} has shape {np.shape(value)}; "
-                           f"expected [{self.n_agents}, dim].")
+                         f"{sorted(names)}, declared "
+                         f"{sorted(self._declared(group))}.")
+    for values, columns in blocks:
+      for name, where in columns:
+        if np.ndim(values) != 2 or len(values) != self.n_agents:
+          raise RuntimeError(
+              f"Feature {name} has shape {np.shape(values[:, where])}; "
+              f"expected [{self.n_agents}, dim].")
     self._checked_groups.add(group)
 
   # --- Hooks for subclasses ---------------------------------------------------
@@ -365,8 +426,14 @@ class CoopTask(composer.Task):
 
   def _per_state_cache(self, physics):
     """A dict for values of the current physics state, emptied when the
-    state changes (a step, a reset, or time moving on outside `step`)."""
-    key = (self._state_version, physics.data.time)
+    state changes (a step, a reset, or time moving on outside `step`).
+
+    The state is the environment's own physics (`after_compile` binds its
+    mjData), which every hook and observable is given; reading the time from
+    it directly saves dm_control's wrappers several times per step.
+    """
+    del physics  # The bound mjData is the same.
+    key = (self._state_version, self._mjdata.time)
     if key != self._state_key:
       self._state_key = key
       self._state_cache = {}
@@ -425,18 +492,25 @@ class CoopTask(composer.Task):
 
   def _shared_exteroception(self, physics, frames):
     """Features every cooperative task exposes (see `observables.py`), from
-    one compiled call."""
-    k = self._config.k_neighbours
-    shared = kernels.shared_exteroception(
-        frames.as_packed(), k, *self._heights.geom_args(physics),
-        *self._heights.ray_args)
-    return {
-        "self_pose": shared[:, :4],
-        "teammates": shared[:, 4:4 + 2 * k],
-        "teammates_mask": shared[:, 4 + 2 * k:4 + 3 * k],
-        "heights": shared[:, 4 + 3 * k:],
-    }
+    one compiled call: [n, 4 + 3k + heights], `_shared_columns` name them."""
+    return kernels.shared_exteroception(
+        frames.as_packed(), self._config.k_neighbours,
+        *self._heights.geom_args(physics), *self._heights.ray_args)
 
 
 SHARED_EXTERO_FEATURES = ("self_pose", "teammates", "teammates_mask",
                           "heights")
+
+# Discounts: immutable float32 scalars (shape (), as the spec says).
+_ZERO, _ONE = np.float32(0.0), np.float32(1.0)
+
+# The proprioception's columns in `CoopTask._agent_state`'s packed array
+# (after the five frame columns).
+_PROPRIO_COLUMNS = kernels.proprio_columns(5, "proprio/")
+_EVERYTHING = slice(None)
+
+
+def _as_blocks(prefix, features):
+  """A task hook's {name: [n, dim]} as blocks (see `CoopTask._blocks`)."""
+  return tuple((values, ((prefix + name, _EVERYTHING),))
+               for name, values in features.items())

@@ -10,8 +10,6 @@ rotated by the torso's yaw (x ahead, y to the left), in metres. Sizes never
 depend on the number of agents, so one policy runs in any population.
 """
 
-import typing
-
 import mujoco
 import numpy as np
 
@@ -26,15 +24,41 @@ _RAY_ORIGIN_HEIGHT = 8.0
 _NO_HIT_HEIGHT = -3.0
 
 
-class AgentFrames(typing.NamedTuple):
-  """Where every agent is and which way it faces, for one physics state."""
+class AgentFrames:
+  """Where every agent is and which way it faces, for one physics state.
 
-  position: np.ndarray  # [n, 3] torso centres, world frame (m).
-  cos: np.ndarray  # [n] cosine of the heading (yaw).
-  sin: np.ndarray  # [n] sine of the heading (yaw).
-  packed: typing.Optional[np.ndarray] = None
-  """[n, 5] x, y, z, cos, sin: the other fields are views of it, and the
-  compiled kernels read it. None for frames built by hand (see `as_packed`)."""
+  Fields: `position` [n, 3] torso centres, world frame (m); `cos`, `sin` [n]
+  of the heading (yaw); `packed` [n, >= 5] whose first five columns are x,
+  y, z, cos, sin, the array the compiled kernels read (None for frames built
+  by hand, see `as_packed`). Built from a kernel's output, the other fields
+  are views of `packed`, made on first use: most steps need none of them.
+  """
+
+  __slots__ = ("_position", "_cos", "_sin", "packed")
+
+  def __init__(self, position=None, cos=None, sin=None, packed=None):
+    if packed is None and (position is None or cos is None or sin is None):
+      raise ValueError("AgentFrames needs position, cos and sin, or packed.")
+    self._position, self._cos, self._sin = position, cos, sin
+    self.packed = packed
+
+  @property
+  def position(self):
+    if self._position is None:
+      self._position = self.packed[:, :3]
+    return self._position
+
+  @property
+  def cos(self):
+    if self._cos is None:
+      self._cos = self.packed[:, 3]
+    return self._cos
+
+  @property
+  def sin(self):
+    if self._sin is None:
+      self._sin = self.packed[:, 4]
+    return self._sin
 
   @classmethod
   def from_walkers(cls, walkers, physics):
@@ -44,17 +68,17 @@ class AgentFrames(typing.NamedTuple):
   @classmethod
   def from_bodies(cls, physics, body_ids):
     """Frames of the bodies `body_ids` (the agents' torsos)."""
-    return cls.from_packed(kernels.heading_frames(
+    return cls(packed=kernels.heading_frames(
         physics.data.xpos, physics.data.xmat, body_ids))
 
   @classmethod
   def from_packed(cls, packed):
-    """Frames that view the first five columns of `packed` ([n, >= 5]: x, y,
-    z, cos, sin, e.g. `kernels.heading_frames` or `kernels.agent_state`)."""
-    return cls(packed[:, :3], packed[:, 3], packed[:, 4], packed[:, :5])
+    """Frames of `packed` ([n, >= 5], first columns x, y, z, cos, sin, e.g.
+    `kernels.heading_frames` or `kernels.agent_state`), not copied."""
+    return cls(packed=packed)
 
   def as_packed(self):
-    """The [n, 5] array the kernels read, built if the frames lack one."""
+    """The [n, >= 5] array the kernels read, built if the frames lack one."""
     if self.packed is not None:
       return self.packed
     return np.column_stack([self.position, self.cos, self.sin]).astype(

@@ -59,6 +59,9 @@ class Transport(base.CoopTask):
                              mass=config.cylinder_mass)
     arena.add_free_entity(self.cylinder)
     super().__init__(arena, ["ant"] * n_agents, config)
+    self._scales = (float(config.cylinder_target_scale),
+                    float(config.agent_cylinder_scale),
+                    float(config.agent_target_scale))
 
   def _exteroception(self, physics, frames):
     offsets = self._measure(physics)[3]
@@ -81,13 +84,10 @@ class Transport(base.CoopTask):
   def _measure(self, physics):
     """`measure` of this physics state (computed once per state)."""
     def compute():
-      cfg = self._config
       data = physics.data.ptr
       return measure(self.frames(physics).packed, data.xpos, data.cvel,
                      self.cylinder.body_id, self._arena.target_position,
-                     (float(cfg.cylinder_target_scale),
-                      float(cfg.agent_cylinder_scale),
-                      float(cfg.agent_target_scale)))
+                     self._scales)
     return self.per_state("measure", physics, compute)
 
   def _update_status(self, physics):
