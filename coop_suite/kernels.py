@@ -119,6 +119,24 @@ def _write_proprioception(xpos, xmat, qpos, qvel, b, qpos_adr, dof_adr, free,
 
 
 @numba.njit(cache=True)
+def add_rewards(terms, sums, returns):
+  """Every agent's reward from its terms ([terms, n]): the total, summed in
+  term order, as float32 [n]; adds the terms to `sums` ([terms, n]) and the
+  total to `returns` ([n]) in place."""
+  n = terms.shape[1]
+  total = np.zeros(n)
+  for t in range(terms.shape[0]):
+    for i in range(n):
+      sums[t, i] += terms[t, i]
+      total[i] += terms[t, i]
+  out = np.empty(n, dtype=np.float32)
+  for i in range(n):
+    returns[i] += total[i]
+    out[i] = total[i]
+  return out
+
+
+@numba.njit(cache=True)
 def clip_finite(values, low, high):
   """`values` [n, d] clipped to [low[j], high[j]] in column j, as a new
   float array; None if any value is NaN or infinite."""

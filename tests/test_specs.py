@@ -143,6 +143,23 @@ def test_episode_metrics_report_reward_terms():
                                                          rel=1e-6)
 
 
+def test_reward_terms_that_change_shape_are_refused():
+  """The compiled reward sum trusts the shapes it is given: a task whose
+  terms change in mid-episode (or are not per agent) must fail loudly."""
+  env = coop_suite.load("transport", 2, seed=0)
+  env.reset()
+  env.step(np.zeros((2, 8)))
+  terms = env.task._reward_terms  # pylint: disable=protected-access
+  env.task._reward_terms = lambda physics: {**terms(physics), "extra": np.ones(2)}  # pylint: disable=protected-access
+  with pytest.raises(RuntimeError, match="extra"):
+    env.step(np.zeros((2, 8)))
+  env = coop_suite.load("transport", 2, seed=0)
+  env.reset()
+  env.task._reward_terms = lambda physics: {"alive": np.ones(3)}  # pylint: disable=protected-access
+  with pytest.raises(RuntimeError, match=r"each \[2\]"):
+    env.step(np.zeros((2, 8)))
+
+
 def test_global_state_has_fixed_size():
   env = coop_suite.load("transport", 4, seed=0)
   env.reset()
@@ -164,3 +181,43 @@ def test_constraint_memory_is_sized_for_many_agents():
   assert warnings[mujoco.mjtWarning.mjWARN_CNSTRFULL].number == 0
   assert warnings[mujoco.mjtWarning.mjWARN_CONTACTFULL].number == 0
   assert not env.physics_diverged
+
+
+def _episode_observations(env, steps=4):
+  rng = np.random.RandomState(5)
+  observations = [env.reset().observation]
+  for _ in range(steps):
+    observations.append(env.step(rng.uniform(-1, 1, (env.n_agents, 8)))
+                        .observation)
+  return observations
+
+
+def test_disabled_and_buffered_observables_keep_composer_semantics():
+  """The fast observation path must agree with composer's own rules: a
+  disabled observable disappears from spec and observation, and a
+  non-default one (here buffered) falls back to composer's updater."""
+  reference = _episode_observations(coop_suite.load("transport", 3, seed=2))
+
+  env = coop_suite.load("transport", 3, seed=2)
+  for agent in env.task.observables:
+    agent["extero/heights"].enabled = False
+  observations = _episode_observations(env)
+  assert "extero/heights" not in env.observation_spec()[0]
+  for got, expected in zip(observations, reference):
+    for agent_got, agent_expected in zip(got, expected):
+      assert set(agent_got) == set(agent_expected) - {"extero/heights"}
+      for key, value in agent_got.items():
+        np.testing.assert_array_equal(value, agent_expected[key], key)
+
+  env = coop_suite.load("transport", 3, seed=2)
+  for agent in env.task.observables:
+    agent["proprio/joints_pos"].buffer_size = 2
+  observations = _episode_observations(env)
+  assert not env._observation_updater._lean  # pylint: disable=protected-access
+  for got, expected in zip(observations[1:], reference[1:]):
+    for agent_got, agent_expected in zip(got, expected):
+      assert agent_got["proprio/joints_pos"].shape == (2, 8)
+      np.testing.assert_array_equal(agent_got["proprio/joints_pos"][-1],
+                                    agent_expected["proprio/joints_pos"])
+      np.testing.assert_array_equal(agent_got["extero/heights"],
+                                    agent_expected["extero/heights"])

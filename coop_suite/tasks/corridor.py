@@ -7,9 +7,11 @@ line pays every agent a bonus; success when all have crossed.
 
 import dataclasses
 
+import numba
 import numpy as np
 
 from coop_suite import arenas
+from coop_suite import kernels
 from coop_suite.tasks import base
 from coop_suite.tasks import layouts
 from coop_suite.tasks import rewards
@@ -46,19 +48,23 @@ class Corridor(base.CoopTask):
     self._target = np.array([arena.finish_x, 0.0])
     super().__init__(arena, ["ant"] * n_agents, config)
     self._crossed = np.zeros(n_agents, dtype=bool)
+    # `measure`'s arguments after the frames (the arena does not move).
+    self._geometry = (float(arena.finish_x), arena.slit_entrance,
+                      arena.slit_exit, float(arena.slit_width), self._target,
+                      float(config.agent_target_scale))
 
   def _exteroception(self, physics, frames):
-    arena = self._arena
-    n = self.n_agents
-    slit = np.empty((n, 5))
-    slit[:, 0:2] = frames.to_heading_frame(arena.slit_entrance)
-    slit[:, 2:4] = frames.to_heading_frame(arena.slit_exit)
-    slit[:, 4] = arena.slit_width
+    offsets = self._measure(physics)[2]
     return {
-        "slit": slit,
-        "target": frames.to_heading_frame(self._target),
+        "slit": offsets[:, :5],
+        "target": offsets[:, 5:],
         "crossed": self._crossed[:, None].astype(np.float64),
     }
+
+  def _measure(self, physics):
+    """`measure` of this physics state (computed once per state)."""
+    return self.per_state("measure", physics, lambda: measure(
+        self.frames(physics).packed, *self._geometry))
 
   def _initialize_layout(self, physics, random_state):
     cfg = self._config
@@ -73,21 +79,16 @@ class Corridor(base.CoopTask):
       layouts.place(walker, physics, xy, yaw, random_state)
 
   def _update_status(self, physics):
-    x = physics.data.xpos[self._torso_ids, 0]
-    newly = (x > self._arena.finish_x) & ~self._crossed
-    self._new_crossings = int(np.sum(newly))
+    newly = self._measure(physics)[0] > self._crossed  # Past, not crossed.
+    self._new_crossings = int(np.count_nonzero(newly))
     self._crossed |= newly
-    self._success = bool(np.all(self._crossed))
+    self._success = bool(self._crossed.all())
 
   def _reward_terms(self, physics):
-    cfg = self._config
-    agents = physics.data.xpos[self._torso_ids, :2]
     return {
         "crossing": np.full(self.n_agents,
-                            cfg.crossing_bonus * self._new_crossings),
-        "agent_target": rewards.inverse_distance(
-            cfg.agent_target_scale, rewards.planar_distance(agents,
-                                                            self._target)),
+                            self._config.crossing_bonus * self._new_crossings),
+        "agent_target": self._measure(physics)[1],
     }
 
   def _progress(self, physics):
@@ -100,3 +101,42 @@ class Corridor(base.CoopTask):
   def tracked_positions(self, physics):
     slit = np.append(self._arena.slit_exit, 0.0)
     return np.vstack([super().tracked_positions(physics), slit])
+
+
+@numba.njit(cache=True)
+def measure(frames, finish_x, entrance, exit_, slit_width, target,
+            target_scale):
+  """What the corridor reads from one state, for all agents in one compiled
+  call (see `transport.measure` for why).
+
+  Args:
+    frames: [n, 5] the agents' x, y, z, cos, sin (`AgentFrames.packed`).
+    finish_x: the finish line's x (m).
+    entrance, exit_: [2] the slit's entrance and exit centres (m).
+    slit_width: the slit's width (m).
+    target: [2] the point of the finish line in front of the slit (m).
+    target_scale: coefficient of 1 / (1 + d(agent, target)).
+  Returns:
+    past_finish: [n] whether each agent's torso is past the finish line.
+    agent_target: [n] `rewards.inverse_distance` of d(agent, target).
+    offsets: [n, 7] the slit's entrance and exit in each agent's heading
+      frame, the slit's width, the target in the heading frame (m).
+  """
+  n = frames.shape[0]
+  past_finish = np.empty(n, dtype=np.bool_)
+  agent_target = np.empty(n)
+  offsets = np.empty((n, 7))
+  tx, ty = target[0], target[1]
+  for i in range(n):
+    x, y, cos, sin = frames[i, 0], frames[i, 1], frames[i, 3], frames[i, 4]
+    past_finish[i] = x > finish_x
+    agent_target[i] = rewards.inverse_distance(
+        target_scale, rewards.planar_norm(x - tx, y - ty))
+    offsets[i, 0], offsets[i, 1] = kernels.to_heading(
+        cos, sin, entrance[0] - x, entrance[1] - y)
+    offsets[i, 2], offsets[i, 3] = kernels.to_heading(
+        cos, sin, exit_[0] - x, exit_[1] - y)
+    offsets[i, 4] = slit_width
+    offsets[i, 5], offsets[i, 6] = kernels.to_heading(cos, sin, tx - x,
+                                                      ty - y)
+  return past_finish, agent_target, offsets
