@@ -16,9 +16,11 @@ Ravine Bridging"), selected with `stage`:
 
 import dataclasses
 
+import numba
 import numpy as np
 
 from coop_suite import arenas
+from coop_suite import kernels
 from coop_suite.entities import Stone
 from coop_suite.tasks import base
 from coop_suite.tasks import layouts
@@ -88,56 +90,41 @@ class Ravine(base.CoopTask):
                      config)
     self._is_crosser = np.array([s == "crosser" for s in self.species])
     self._fallen = np.zeros(self.n_agents, dtype=bool)
+    self._fall_term = np.zeros(self.n_agents)
     self._markers = np.zeros((n_agents, 2))
+    # `measure`'s arguments after the stone (the arena does not move).
+    self._geometry = (
+        float(arena.near_edge_x), float(arena.far_edge_x),
+        float(arena.finish_x), float(arena.width), float(arena.depth),
+        float(config.bridge_scale), float(config.destination_scale))
 
-  # --- Geometry ----------------------------------------------------------------
+  # --- Per-state numbers --------------------------------------------------------
 
-  def _crosser_positions(self, physics):
-    """World xy [m, 2] of the crossers the pushers serve (real or markers)."""
-    if self.stage == "pushers":
-      return self._markers
-    return physics.data.xpos[self._torso_ids[self._is_crosser], :2]
-
-  def _nearest_crosser(self, physics):
-    """World xy of the crosser nearest the ravine that has not fallen in."""
-    def compute():
-      xy = self._crosser_positions(physics)
-      if self.stage == "pushers":
-        standing = np.ones(len(xy), dtype=bool)
-      else:
-        standing = ~self._fallen[self._is_crosser]
-      # Fallen crossers no longer need a bridge: push them out of the race.
-      gap = np.abs(self._arena.near_edge_x - xy[:, 0]) + 1e3 * ~standing
-      return xy[int(np.argmin(gap))]
-    return self.per_state("nearest_crosser", physics, compute)
+  def _measure(self, physics):
+    """`measure` of this physics state (computed once per state, after the
+    status update of the step that reached it: the nearest crosser skips
+    crossers that have fallen)."""
+    return self.per_state("measure", physics, lambda: measure(
+        self.frames(physics).packed, self._is_crosser, self._fallen,
+        self._markers, self.stage == "pushers", physics.data.ptr.xpos,
+        self.stone.body_id, *self._geometry))
 
   # --- Hooks -------------------------------------------------------------------
 
   def _exteroception(self, physics, frames):
-    arena = self._arena
-    n = self.n_agents
-    y = frames.position[:, 1]
-    ravine = np.empty((n, 6))
-    ravine[:, 0:2] = frames.to_heading_frame(
-        np.stack([np.full(n, arena.near_edge_x), y], -1))
-    ravine[:, 2:4] = frames.to_heading_frame(
-        np.stack([np.full(n, arena.far_edge_x), y], -1))
-    ravine[:, 4] = arena.width
-    ravine[:, 5] = arena.depth
+    offsets = self._measure(physics)[3]
     return {
-        "stone": frames.to_heading_frame(self.stone.position(physics)[:2]),
-        "ravine": ravine,
-        "finish": frames.to_heading_frame(
-            np.stack([np.full(n, arena.finish_x), y], -1)),
-        "nearest_crosser": frames.to_heading_frame(
-            self._nearest_crosser(physics)),
+        "stone": offsets[:, 0:2],
+        "ravine": offsets[:, 2:8],
+        "finish": offsets[:, 8:10],
+        "nearest_crosser": offsets[:, 10:12],
     }
 
   def _initialize_layout(self, physics, random_state):
     cfg = self._config
     arena = self._arena
     self._fallen = np.zeros(self.n_agents, dtype=bool)
-    self._new_falls = np.zeros(self.n_agents, dtype=bool)
+    self._fall_term = np.zeros(self.n_agents)
     half = cfg.length / 2 - cfg.stone_length / 2 - 2.0
     stone_y = random_state.uniform(-half, half)
     layouts.place_prop(self.stone, physics,
@@ -164,42 +151,31 @@ class Ravine(base.CoopTask):
                     random_state, ground_z=-cfg.depth)
 
   def _update_status(self, physics):
-    position = physics.data.xpos[self._torso_ids]
-    # A crosser has fallen once its torso is below the plane's surface.
-    newly = self._is_crosser & (position[:, 2] < _FALLEN_HEIGHT)
-    self._new_falls = newly & ~self._fallen
-    self._fallen |= newly
-    crossed = self._is_crosser & (position[:, 0] > self._arena.finish_x)
+    self._fall_term, crossed, all_fallen = update_falls(
+        self.frames(physics).packed, self._is_crosser, self._fallen,
+        self._arena.finish_x, _FALLEN_HEIGHT, self._config.fall_penalty)
     if self.stage == "pushers":
       self._success = False  # Judged at the end; see `_progress`.
     else:
-      self._success = bool(np.any(crossed))
-      self._failure = bool(np.all(self._fallen[self._is_crosser]))
-
-  def _bridge_error(self, physics):
-    return abs(self.stone.position(physics)[1]
-               - self._nearest_crosser(physics)[1])
+      self._success = crossed
+      self._failure = all_fallen
 
   def _reward_terms(self, physics):
-    cfg = self._config
-    n = self.n_agents
-    pusher = ~self._is_crosser
+    shaping = self._measure(physics)[2]
     terms = {}
     if self.stage in ("pushers", "joint"):
-      terms["bridge"] = np.where(pusher, rewards.inverse_distance(
-          cfg.bridge_scale, self._bridge_error(physics)), 0.0)
+      terms["bridge"] = shaping[0]
     if self.stage in ("crossers", "joint"):
-      x = physics.data.xpos[self._torso_ids, 0]
-      terms["destination"] = np.where(self._is_crosser, rewards.inverse_distance(
-          cfg.destination_scale, np.abs(self._arena.finish_x - x)), 0.0)
-      terms["fall"] = np.where(self._new_falls, cfg.fall_penalty, 0.0)
+      terms["destination"] = shaping[1]
+      terms["fall"] = self._fall_term
     if self.stage == "joint":
       terms["success"] = np.full(
-          n, cfg.success_bonus if self._success_event else 0.0)
+          self.n_agents,
+          self._config.success_bonus if self._success_event else 0.0)
     return terms
 
   def _progress(self, physics):
-    bridge_error = self._bridge_error(physics)
+    bridge_error = self._measure(physics)[1]
     out = {"bridge_error": float(bridge_error),
            "stone_in_place": bool(bridge_error < self._config.bridge_tolerance),
            "fallen": int(np.sum(self._fallen))}
@@ -209,8 +185,115 @@ class Ravine(base.CoopTask):
 
   def _task_state(self, physics):
     return np.concatenate([self.stone.position(physics)[:2],
-                           self._nearest_crosser(physics)])
+                           self._measure(physics)[0]])
 
   def tracked_positions(self, physics):
     return np.vstack([super().tracked_positions(physics),
                       self.stone.position(physics)])
+
+
+@numba.njit(cache=True)
+def update_falls(frames, is_crosser, fallen, finish_x, fallen_height,
+                 fall_penalty):
+  """One step's status: crossers whose torso is below `fallen_height` have
+  fallen (marked in `fallen`, in place).
+
+  Args:
+    frames: [n, 5] the agents' x, y, z, cos, sin (`AgentFrames.packed`).
+    is_crosser, fallen: [n] bools.
+    finish_x: the finish line's x (m).
+    fallen_height: torso z below which a crosser has fallen in (m).
+    fall_penalty: paid once, when a crosser falls.
+  Returns:
+    fall: [n] `fall_penalty` for the crossers that fell at this step, else 0.
+    crossed: whether a crosser is past the finish line.
+    all_fallen: whether every crosser has fallen (True without crossers).
+  """
+  n = frames.shape[0]
+  fall = np.zeros(n)
+  crossed, all_fallen = False, True
+  for i in range(n):
+    if not is_crosser[i]:
+      continue
+    if frames[i, 2] < fallen_height:
+      if not fallen[i]:
+        fall[i] = fall_penalty
+      fallen[i] = True
+    crossed = crossed or frames[i, 0] > finish_x
+    all_fallen = all_fallen and fallen[i]
+  return fall, crossed, all_fallen
+
+
+@numba.njit(cache=True)
+def measure(frames, is_crosser, fallen, markers, use_markers, xpos, stone,
+            near_edge_x, far_edge_x, finish_x, width, depth, bridge_scale,
+            destination_scale):
+  """What the ravine reads from one state, for all agents in one compiled
+  call (see `transport.measure` for why).
+
+  The crosser the pushers serve is the one nearest the ravine, |near_edge_x
+  - x| smallest, among the `markers` ([m, 2] world xy, with `use_markers`:
+  the pushers stage) or the crossers that have not fallen in (fallen ones
+  count 1000 m further); ties keep the first.
+
+  Args:
+    frames: [n, 5] the agents' x, y, z, cos, sin (`AgentFrames.packed`).
+    is_crosser, fallen: [n] bools.
+    markers, use_markers: see above.
+    xpos: [nbody, 3] MuJoCo's body positions; stone: the stone's body id.
+    near_edge_x, far_edge_x, finish_x: the trench's edges and the finish
+      line (m); width, depth: the trench's (m).
+    bridge_scale, destination_scale: coefficients of 1 / (1 + d) for the
+      pushers' bridge error and the crossers' distance to the finish line.
+  Returns:
+    nearest: [2] world xy of the crosser the pushers serve.
+    bridge_error: |stone_y - nearest_y| (m).
+    shaping: [2, n] bridge (pushers; 0 for crossers) and destination
+      (crossers; 0 for pushers) terms.
+    offsets: [n, 12] in each agent's heading frame: the stone; the near and
+      far edges level with the agent, width, depth; the finish line level
+      with the agent; the nearest crosser (m).
+  """
+  n = frames.shape[0]
+  best, best_gap = -1, 0.0
+  count = markers.shape[0] if use_markers else n
+  for j in range(count):
+    if use_markers:
+      x, standing = markers[j, 0], True
+    elif is_crosser[j]:
+      x, standing = frames[j, 0], not fallen[j]
+    else:
+      continue
+    gap = abs(near_edge_x - x) + (0.0 if standing else 1e3)
+    if best < 0 or gap < best_gap:
+      best, best_gap = j, gap
+  if best < 0:
+    raise ValueError("The ravine has no crosser for the pushers to serve.")
+  nearest = np.empty(2)
+  if use_markers:
+    nearest[0], nearest[1] = markers[best, 0], markers[best, 1]
+  else:
+    nearest[0], nearest[1] = frames[best, 0], frames[best, 1]
+  sx, sy = xpos[stone, 0], xpos[stone, 1]
+  bridge_error = abs(sy - nearest[1])
+  shaping = np.zeros((2, n))
+  offsets = np.empty((n, 12))
+  for i in range(n):
+    x, y, cos, sin = frames[i, 0], frames[i, 1], frames[i, 3], frames[i, 4]
+    if is_crosser[i]:
+      shaping[1, i] = rewards.inverse_distance(destination_scale,
+                                               abs(finish_x - x))
+    else:
+      shaping[0, i] = rewards.inverse_distance(bridge_scale, bridge_error)
+    offsets[i, 0], offsets[i, 1] = kernels.to_heading(cos, sin, sx - x,
+                                                      sy - y)
+    offsets[i, 2], offsets[i, 3] = kernels.to_heading(cos, sin,
+                                                      near_edge_x - x, 0.0)
+    offsets[i, 4], offsets[i, 5] = kernels.to_heading(cos, sin,
+                                                      far_edge_x - x, 0.0)
+    offsets[i, 6], offsets[i, 7] = width, depth
+    offsets[i, 8], offsets[i, 9] = kernels.to_heading(cos, sin, finish_x - x,
+                                                      0.0)
+    offsets[i, 10], offsets[i, 11] = kernels.to_heading(
+        cos, sin, nearest[0] - x, nearest[1] - y)
+  return nearest, bridge_error, shaping, offsets
