@@ -1,14 +1,17 @@
-"""Compiled kernels (numba) for the features every agent computes each step.
+"""Compiled kernels (numba) for what every task computes at each step.
 
 Why compiled: for transport with four Ants the physics of one control step
-costs ~460 us on our 2-core machine, and each numpy call on these tiny
-arrays costs ~1 us (twice that with the caches cold after the physics). The
-proprioception, heading frames, nearest teammates and ray-cast heights of
-all agents took ~100 such calls, i.e. a third of the step. Each kernel below
-does one of them for all agents in one call, with the same floating-point
-operations in the same order as the numpy expressions in their docstrings,
-so the features are bit-identical to the numpy versions they replace
-(`tests/test_kernels.py` checks it on random states).
+costs ~400-500 us on our 2-core machine, and each numpy call on these tiny
+arrays costs ~1 us hot and several times that right after the physics,
+which leaves the caches cold. The proprioception, heading frames, nearest
+teammates and ray-cast heights of all agents took ~100 such calls, i.e. a
+third of the step. Each kernel below does one of them for all agents in one
+call, with the same floating-point operations in the same order as the numpy
+expressions in their docstrings, so the features are bit-identical to the
+numpy versions they replace (`tests/test_kernels.py` checks it on real
+states). The same holds for each task's own `measure` kernel (its geometry,
+status and shaping terms, next to the task in `tasks/`), the reward sums
+(`add_rewards`) and the action check (`clip_finite`).
 
 Arrays are MuJoCo's own (`physics.data.xpos` etc., never copied in Python);
 every kernel returns a new array, so observations built from it stay valid

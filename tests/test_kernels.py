@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import coop_suite
+from coop_suite import kernels
 from coop_suite.entities import ant as ant_lib
 from coop_suite.tasks import observables
 
@@ -170,3 +171,110 @@ def test_observations_are_not_overwritten_by_later_steps():
   for agent, copy in zip(first, kept):
     for key, value in copy.items():
       np.testing.assert_array_equal(agent[key], value, key)
+
+
+def test_clip_finite_and_add_rewards_match_numpy():
+  rng = np.random.RandomState(4)
+  low, high = -np.ones(8), np.linspace(0.5, 1.0, 8)
+  values = rng.uniform(-2, 2, (5, 8))
+  np.testing.assert_array_equal(kernels.clip_finite(values, low, high),
+                                np.minimum(np.maximum(values, low), high))
+  for bad in (np.nan, np.inf, -np.inf):
+    broken = values.copy()
+    broken[3, 2] = bad
+    assert kernels.clip_finite(broken, low, high) is None
+
+  terms = rng.uniform(-5, 5, (4, 3))
+  sums, returns = rng.uniform(size=(4, 3)), rng.uniform(size=3)
+  expected_sums, expected_returns = sums + terms, returns.copy()
+  total = np.zeros(3)
+  for term in terms:  # The order `CoopTask.get_reward` used to add them in.
+    total += term
+  expected_returns += total
+  got = kernels.add_rewards(terms, sums, returns)
+  np.testing.assert_array_equal(got, total.astype(np.float32))
+  np.testing.assert_array_equal(sums, expected_sums)
+  np.testing.assert_array_equal(returns, expected_returns)
+
+
+def _offsets(frames, points):
+  """[n, m, 2] heading-frame offsets to per-agent world points [n, m, 2]."""
+  delta = points - frames.position[:, None, :2]
+  return _numpy_rotate(delta, frames.cos[:, None], frames.sin[:, None])
+
+
+def test_task_measure_kernels_match_numpy():
+  """Each task's compiled `measure` against the numpy it replaced."""
+  inverse = lambda scale, d: scale / (1.0 + d)  # pylint: disable=unnecessary-lambda-assignment
+  for env in _states("transport", 3):
+    task, physics = env.task, env.physics
+    frames = task.frames(physics)
+    cfg = task.config
+    cylinder = physics.data.xpos[task.cylinder.body_id, :2]
+    target = task.arena.target_position
+    goals = np.stack([cylinder, target])
+    distance, speed, shaping, offsets = task._measure(physics)  # pylint: disable=protected-access
+    assert distance == np.sqrt(np.sum((cylinder - target)**2))
+    velocity = physics.data.cvel[task.cylinder.body_id, 3:5]
+    assert speed == np.sqrt(velocity[0]**2 + velocity[1]**2)
+    to_goals = np.sqrt(np.sum((frames.position[:, None, :2] - goals)**2, -1))
+    np.testing.assert_array_equal(shaping, np.stack([
+        np.full(3, inverse(cfg.cylinder_target_scale, distance)),
+        inverse(cfg.agent_cylinder_scale, to_goals[:, 0]),
+        inverse(cfg.agent_target_scale, to_goals[:, 1])]))
+    np.testing.assert_array_equal(offsets, _offsets(
+        frames, np.broadcast_to(goals, (3, 2, 2))).reshape(3, 4))
+
+  for env in _states("corridor", 3):
+    task, physics = env.task, env.physics
+    frames, arena = task.frames(physics), task.arena
+    past, agent_target, offsets = task._measure(physics)  # pylint: disable=protected-access
+    target = np.array([arena.finish_x, 0.0])
+    np.testing.assert_array_equal(past, frames.position[:, 0] > arena.finish_x)
+    np.testing.assert_array_equal(agent_target, inverse(
+        task.config.agent_target_scale,
+        np.sqrt(np.sum((frames.position[:, :2] - target)**2, -1))))
+    points = np.broadcast_to(
+        np.stack([arena.slit_entrance, arena.slit_exit, target]), (3, 3, 2))
+    expected = _offsets(frames, points)
+    np.testing.assert_array_equal(offsets[:, 0:4],
+                                  expected[:, :2].reshape(3, 4))
+    np.testing.assert_array_equal(offsets[:, 4], arena.slit_width)
+    np.testing.assert_array_equal(offsets[:, 5:7], expected[:, 2])
+
+  for stage in ("joint", "pushers"):
+    for env in _states("ravine", 2, stage=stage):
+      task, physics = env.task, env.physics
+      frames, arena, cfg = task.frames(physics), task.arena, task.config
+      nearest, error, shaping, offsets = task._measure(physics)  # pylint: disable=protected-access
+      crosser = np.array([s == "crosser" for s in task.species])
+      if stage == "pushers":
+        candidates, standing = task._markers, np.ones(2, bool)  # pylint: disable=protected-access
+      else:
+        candidates = frames.position[crosser, :2]
+        standing = ~task._fallen[crosser]  # pylint: disable=protected-access
+      gap = np.abs(arena.near_edge_x - candidates[:, 0]) + 1e3 * ~standing
+      np.testing.assert_array_equal(nearest, candidates[np.argmin(gap)])
+      stone = physics.data.xpos[task.stone.body_id, :2]
+      assert error == abs(stone[1] - nearest[1])
+      x = frames.position[:, 0]
+      np.testing.assert_array_equal(shaping, np.stack([
+          np.where(crosser, 0.0, inverse(cfg.bridge_scale, error)),
+          np.where(crosser, inverse(cfg.destination_scale,
+                                    np.abs(arena.finish_x - x)), 0.0)]))
+      y = frames.position[:, 1]
+      n = len(y)
+      level = lambda edge: np.stack([np.full(n, edge), y], -1)  # pylint: disable=cell-var-from-loop,unnecessary-lambda-assignment
+      points = np.stack([np.broadcast_to(stone, (n, 2)),
+                         level(arena.near_edge_x), level(arena.far_edge_x),
+                         level(arena.finish_x),
+                         np.broadcast_to(nearest, (n, 2))], 1)
+      expected = _offsets(frames, points)
+      np.testing.assert_array_equal(offsets[:, 0:2], expected[:, 0])
+      np.testing.assert_array_equal(offsets[:, 2:4], expected[:, 1])
+      np.testing.assert_array_equal(offsets[:, 4:6], expected[:, 2])
+      np.testing.assert_array_equal(offsets[:, 6:8],
+                                    np.tile([arena.width, arena.depth],
+                                            (n, 1)))
+      np.testing.assert_array_equal(offsets[:, 8:10], expected[:, 3])
+      np.testing.assert_array_equal(offsets[:, 10:12], expected[:, 4])

@@ -18,6 +18,12 @@ that only overrides the hooks below:
   `TaskConfig`).
 * `_progress(physics)`: task-specific figures for `episode_metrics`.
 * `_task_state(physics)`: task objects' part of the global state.
+
+The three cooperative tasks compute what these hooks need from one state
+(distances, heading-frame offsets, shaping terms) in one compiled `measure`
+kernel each, cached per state with `per_state`; the hooks only pick from its
+outputs. That is a speed choice (see `kernels.py`), not a requirement: a new
+task can write its hooks in numpy first.
 """
 
 import dataclasses

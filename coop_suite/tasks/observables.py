@@ -17,8 +17,8 @@ from coop_suite.arenas import TERRAIN_GROUP
 from coop_suite import kernels
 
 # Height-sample rays start this far above the agent's torso (metres). The
-# rays fan out from one point (one `mj_multiRay` call per agent), so a high
-# origin keeps them close to vertical: within 6 degrees for the default grid.
+# rays fan out from one point per agent, so a high origin keeps them close to
+# vertical: within 6 degrees for the default grid.
 _RAY_ORIGIN_HEIGHT = 8.0
 # Height reported where a ray hits nothing within its range (metres).
 _NO_HIT_HEIGHT = -3.0
