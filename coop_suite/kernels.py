@@ -28,7 +28,7 @@ import mujoco
 import numba
 import numpy as np
 
-# Column layout of `proprioception`'s output, in PROPRIOCEPTION_KEYS order.
+# Column layout of the proprioception (`agent_state`'s columns 5 onwards).
 PROPRIO_LAYOUT = (("joints_pos", 8), ("joints_vel", 8), ("torso_height", 1),
                   ("gravity", 3), ("velocity", 3), ("angular_velocity", 3),
                   ("prev_action", 8))
@@ -95,8 +95,16 @@ def _write_frame(xpos, xmat, b, out, i, col):
 @numba.njit(cache=True)
 def _write_proprioception(xpos, xmat, qpos, qvel, b, qpos_adr, dof_adr, free,
                           prev_action, out, i, col):
-  """One Ant's proprioception into out[i, col:col + PROPRIO_SIZE]
-  (`proprioception`); qpos_adr, dof_adr and prev_action are its rows."""
+  """One Ant's proprioception into out[i, col:col + PROPRIO_SIZE], in
+  PROPRIO_LAYOUT order; b is its torso body, qpos_adr, dof_adr and
+  prev_action are its rows, free its free joint's first dof.
+
+  joints_pos = qpos[qpos_adr], joints_vel = qvel[dof_adr], torso_height =
+  xpos[b, 2], gravity = the last row of the torso's xmat (the world's z axis
+  in the torso frame), velocity = v^T R (the free joint's world linear
+  velocity in the torso frame), angular_velocity = the free joint's (already
+  local) angular velocity, prev_action = the last action.
+  """
   joints = qpos_adr.shape[0]
   for j in range(joints):
     out[i, col + j] = qpos[qpos_adr[j]]
@@ -168,30 +176,11 @@ def heading_frames(xpos, xmat, bodies):
 
 
 @numba.njit(cache=True)
-def proprioception(xpos, xmat, qpos, qvel, torso, qpos_adr, dof_adr, free_adr,
-                   prev_action):
-  """Every Ant's proprioception, [n, PROPRIO_SIZE] in PROPRIO_LAYOUT order.
-
-  joints_pos = qpos[qpos_adr], joints_vel = qvel[dof_adr], torso_height =
-  xpos[torso, 2], gravity = the last row of the torso's xmat (the world's z
-  axis in the torso frame), velocity = v^T R (the free joint's world linear
-  velocity in the torso frame), angular_velocity = the free joint's (already
-  local) angular velocity, prev_action = the last action.
-  """
-  n = torso.shape[0]
-  out = np.empty((n, PROPRIO_SIZE))
-  for i in range(n):
-    _write_proprioception(xpos, xmat, qpos, qvel, torso[i], qpos_adr[i],
-                          dof_adr[i], free_adr[i], prev_action[i], out, i, 0)
-  return out
-
-
-@numba.njit(cache=True)
 def agent_state(xpos, xmat, qpos, qvel, torso, qpos_adr, dof_adr, free_adr,
                 prev_action):
-  """`heading_frames` of the torsos and `proprioception` side by side,
-  [n, 5 + PROPRIO_SIZE]: what every task reads at every control step, in
-  one call."""
+  """Every Ant's torso frame (x, y, z, cos, sin as `heading_frames`) and
+  proprioception (`_write_proprioception`) side by side, [n, 5 +
+  PROPRIO_SIZE]: what every task reads at every control step, in one call."""
   n = torso.shape[0]
   out = np.empty((n, 5 + PROPRIO_SIZE))
   for i in range(n):

@@ -412,11 +412,10 @@ class CoopTask(composer.Task):
                          f"{sorted(names)}, declared "
                          f"{sorted(self._declared(group))}.")
     for values, columns in blocks:
-      for name, where in columns:
-        if np.ndim(values) != 2 or len(values) != self.n_agents:
-          raise RuntimeError(
-              f"Feature {name} has shape {np.shape(values[:, where])}; "
-              f"expected [{self.n_agents}, dim].")
+      if np.ndim(values) != 2 or len(values) != self.n_agents:
+        raise RuntimeError(
+            f"Features {[name for name, _ in columns]} come from an array of "
+            f"shape {np.shape(values)}; expected [{self.n_agents}, dim].")
     self._checked_groups.add(group)
 
   # --- Hooks for subclasses ---------------------------------------------------
