@@ -110,7 +110,7 @@ def measure(frames, finish_x, entrance, exit_, slit_width, target,
   call (see `transport.measure` for why).
 
   Args:
-    frames: [n, 5] the agents' x, y, z, cos, sin (`AgentFrames.packed`).
+    frames: [n, >= 5] the agents' x, y, z, cos, sin (`AgentFrames.packed`).
     finish_x: the finish line's x (m).
     entrance, exit_: [2] the slit's entrance and exit centres (m).
     slit_width: the slit's width (m).

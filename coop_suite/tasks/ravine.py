@@ -199,7 +199,7 @@ def update_falls(frames, is_crosser, fallen, finish_x, fallen_height,
   fallen (marked in `fallen`, in place).
 
   Args:
-    frames: [n, 5] the agents' x, y, z, cos, sin (`AgentFrames.packed`).
+    frames: [n, >= 5] the agents' x, y, z, cos, sin (`AgentFrames.packed`).
     is_crosser, fallen: [n] bools.
     finish_x: the finish line's x (m).
     fallen_height: torso z below which a crosser has fallen in (m).
@@ -237,7 +237,7 @@ def measure(frames, is_crosser, fallen, markers, use_markers, xpos, stone,
   count 1000 m further); ties keep the first.
 
   Args:
-    frames: [n, 5] the agents' x, y, z, cos, sin (`AgentFrames.packed`).
+    frames: [n, >= 5] the agents' x, y, z, cos, sin (`AgentFrames.packed`).
     is_crosser, fallen: [n] bools.
     markers, use_markers: see above.
     xpos: [nbody, 3] MuJoCo's body positions; stone: the stone's body id.

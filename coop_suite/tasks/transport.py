@@ -6,7 +6,6 @@ the cylinder's centre rests inside the target zone.
 """
 
 import dataclasses
-import math
 
 import numba
 import numpy as np
@@ -119,7 +118,6 @@ class Transport(base.CoopTask):
                       self.cylinder.position(physics), target])
 
 
-
 @numba.njit(cache=True)
 def measure(frames, xpos, cvel, cylinder, target, scales):
   """Everything transport reads from one state, for all agents in one
@@ -127,7 +125,7 @@ def measure(frames, xpos, cvel, cylinder, target, scales):
   caches the physics has just flushed).
 
   Args:
-    frames: [n, 5] the agents' x, y, z, cos, sin (`AgentFrames.packed`).
+    frames: [n, >= 5] the agents' x, y, z, cos, sin (`AgentFrames.packed`).
     xpos: [nbody, 3] and cvel: [nbody, 6], MuJoCo's body positions and
       velocities (`physics.data`).
     cylinder: the cylinder's body id.
@@ -147,8 +145,7 @@ def measure(frames, xpos, cvel, cylinder, target, scales):
   cylinder_target = rewards.planar_norm(cx - tx, cy - ty)
   # cvel is [angular, linear] at the subtree's centre of mass: the body's own
   # for a single free body.
-  vx, vy = cvel[cylinder, 3], cvel[cylinder, 4]
-  cylinder_speed = math.sqrt(vx * vx + vy * vy)
+  cylinder_speed = rewards.planar_norm(cvel[cylinder, 3], cvel[cylinder, 4])
   shaping = np.empty((3, n))
   offsets = np.empty((n, 4))
   for i in range(n):
