@@ -7,8 +7,6 @@ moves for several; the stone (12 kg: ~47 N) moves for one pusher, faster for
 two. Measured with scripted pushes in `tests/test_physics.py`.
 """
 
-import math
-
 from dm_control import composer
 from dm_control import mjcf
 import numpy as np
@@ -45,12 +43,6 @@ class _FreeProp(composer.Entity):
   def position(self, physics):
     """Centre of the body, shape [3], world frame (metres)."""
     return physics.data.xpos[self._body_id]
-
-  def planar_speed(self, physics):
-    """Horizontal speed of the centre of mass (m/s)."""
-    # cvel is [angular, linear] at the subtree CoM; fine for a single body.
-    velocity = physics.data.cvel[self._body_id, 3:5]
-    return math.sqrt(velocity.dot(velocity))
 
 
 class Cylinder(_FreeProp):

@@ -396,6 +396,16 @@ class CoopTask(composer.Task):
     cache[group] = blocks
     return blocks
 
+  def _agent_feature(self, physics, name, index):
+    """Agent `index`'s feature `name`, for observables read one by one
+    (composer's own updater, when an observable has non-default settings):
+    a view into its group's cached blocks, not a rebuilt feature dict."""
+    for values, columns in self._blocks(name.split("/", 1)[0], physics):
+      for feature, where in columns:
+        if feature == name:
+          return values[index, where]
+    raise KeyError(f"{type(self).__name__} has no feature {name!r}.")
+
   def _declared(self, group):
     """The names a group must compute, 'group/name'."""
     names = {"proprio": ant_lib.PROPRIOCEPTION_KEYS,
@@ -482,15 +492,12 @@ class CoopTask(composer.Task):
 
   def _build_agent_observables(self, index):
     """One agent's observable dict, keys grouped by prefix."""
-    names = [f"proprio/{k}" for k in ant_lib.PROPRIOCEPTION_KEYS]
-    names += [f"extero/{k}" for k in self.EXTERO_FEATURES]
-    if self.SHARED_EXTERO:
-      names += [f"extero/{k}" for k in SHARED_EXTERO_FEATURES]
-    names += [f"command/{k}" for k in self.COMMAND_FEATURES]
+    names = [name for group in FEATURE_GROUPS
+             for name in self._declared(group)]
     out = {}
     for name in names:
       out[name] = observable.Generic(
-          lambda physics, name=name: self.features(physics)[name][index])
+          lambda physics, name=name: self._agent_feature(physics, name, index))
       out[name].enabled = True
       # Lets `CoopEnvironment` read all agents' observations in one batch.
       out[name].batch_source = (self, name, index)
