@@ -252,7 +252,8 @@ def test_task_measure_kernels_match_numpy():
         candidates, standing = task._markers, np.ones(2, bool)  # pylint: disable=protected-access
       else:
         candidates = frames.position[crosser, :2]
-        standing = ~task._fallen[crosser]  # pylint: disable=protected-access
+        done = task._fallen | task._crossed  # pylint: disable=protected-access
+        standing = ~done[crosser]
       gap = np.abs(arena.near_edge_x - candidates[:, 0]) + 1e3 * ~standing
       np.testing.assert_array_equal(nearest, candidates[np.argmin(gap)])
       stone = physics.data.xpos[task.stone.body_id, :2]

@@ -102,8 +102,8 @@ def test_corridor_crossing_pays_all_once_and_success_when_all_crossed(
   assert env.episode_metrics()["success"] is True
 
 
-def test_ravine_joint_crossing_pays_pushers_too_once():
-  env = coop_suite.load("ravine", 2, seed=0)
+def test_ravine_joint_success_when_one_crosses_with_any_pays_pushers_once():
+  env = coop_suite.load("ravine", 2, seed=0, success="any")
   env.reset()
   task, physics = env.task, env.physics
   rng = np.random.RandomState(0)
@@ -119,6 +119,49 @@ def test_ravine_joint_crossing_pays_pushers_too_once():
   timestep = env.step(_zeros(env))
   assert all(r < 50.0 for r in timestep.reward)
   assert env.episode_metrics()["success"] is True
+
+
+def test_ravine_joint_success_needs_every_crosser_by_default():
+  env = coop_suite.load("ravine", 2, seed=0)
+  env.reset()
+  task, physics = env.task, env.physics
+  rng = np.random.RandomState(0)
+  layouts.place(task.walkers[0], physics, [task.arena.finish_x + 0.5, 0.0],
+                0.0, rng)
+  timestep = env.step(_zeros(env))
+  assert all(r < 50.0 for r in timestep.reward)
+  metrics = env.episode_metrics()
+  assert metrics["success"] is False and metrics["crossed"] == 1
+  # The first crosser walks back: its crossing still counts. The second
+  # crosses: success, paid once to all four agents.
+  layouts.place(task.walkers[0], physics, [task.arena.finish_x - 1.0, 0.0],
+                0.0, rng)
+  layouts.place(task.walkers[1], physics, [task.arena.finish_x + 0.5, 2.0],
+                0.0, rng)
+  timestep = env.step(_zeros(env))
+  assert timestep.mid() and all(r >= 50.0 for r in timestep.reward)
+  assert env.episode_metrics()["success"] is True
+  timestep = env.step(_zeros(env))
+  assert all(r < 50.0 for r in timestep.reward)
+
+
+def test_ravine_all_rule_fails_when_one_crosser_falls():
+  for rule, ends in (("all", True), ("any", False)):
+    env = coop_suite.load("ravine", 2, stage="crossers", seed=0, success=rule)
+    env.reset()
+    task, physics = env.task, env.physics
+    stone_y = task.stone.position(physics)[1]
+    y = stone_y + 4.0 if stone_y < 0 else stone_y - 4.0
+    layouts.place(task.walkers[0], physics, [task.arena.ravine_x, y], 0.0,
+                  np.random.RandomState(0), ground_z=-task.arena.depth)
+    timestep = env.step(_zeros(env))
+    assert timestep.last() is ends, rule
+    assert env.episode_metrics()["failure"] is ends, rule
+
+
+def test_ravine_refuses_unknown_success_rule():
+  with pytest.raises(ValueError, match="all.*any"):
+    coop_suite.load("ravine", 2, success="most")
 
 
 def test_ravine_fall_penalty_once_and_failure_when_all_fell():
