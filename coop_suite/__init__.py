@@ -11,9 +11,12 @@ See `docs/observations.md` for every observation with its frame and units.
 import dataclasses
 import numbers
 import os
+import sys
 
 # Headless first: render through EGL unless the user chose a backend. Must be
-# set before dm_control is imported.
+# set before dm_control is imported (see `_headless_renderer` for when it was
+# imported first).
+_GL_CHOSEN_BY_USER = "MUJOCO_GL" in os.environ
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 import numpy as np  # pylint: disable=g-import-not-at-top
@@ -21,6 +24,40 @@ import numpy as np  # pylint: disable=g-import-not-at-top
 from coop_suite.environment import CoopEnvironment  # pylint: disable=g-import-not-at-top
 from coop_suite.environment import is_truncation
 from coop_suite.tasks import TASKS
+
+
+
+def _headless_renderer():
+  """Switches dm_control from GLFW to EGL where GLFW cannot render.
+
+  A library that imports dm_control before coop_suite without MUJOCO_GL set
+  (`ray.rllib` does) leaves dm_control on GLFW, its first choice, which
+  needs a display: every `render()` then fails with `mujoco.FatalError`.
+  dm_control looks its renderer up at each context creation, so replacing
+  it is enough. A backend the user chose is kept.
+  """
+  render = sys.modules.get("dm_control._render")
+  if (_GL_CHOSEN_BY_USER or render is None or render.BACKEND != "glfw"
+      or os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+    return
+  try:
+    render.Renderer = render._import_egl()  # pylint: disable=protected-access
+  except Exception as e:  # pylint: disable=broad-except
+    error = (f"dm_control was imported before coop_suite without MUJOCO_GL "
+             f"and chose GLFW, which cannot render without a display; EGL "
+             f"is not available either ({e}). Set MUJOCO_GL=egl (or osmesa) "
+             "in the environment before starting Python.")
+
+    def no_renderer(*args, **kwargs):
+      del args, kwargs
+      raise RuntimeError(error)
+    render.Renderer = no_renderer
+    return
+  render.BACKEND = "egl"
+  render.USING_GPU = True
+
+
+_headless_renderer()
 
 __all__ = ["load", "TASKS", "CoopEnvironment", "is_truncation",
            "pettingzoo_env", "agent_range"]
@@ -50,10 +87,13 @@ def load(task, n_agents=None, *, seed=None, time_limit=None, **kwargs):
       `n_pushers` for the ravine.
 
   Returns:
-    A `CoopEnvironment` (a `composer.Environment`).
+    A `CoopEnvironment` (a `composer.Environment`). It pickles and copies
+    as these arguments: the copy is a fresh build, not a snapshot of the
+    current episode.
 
   Raises:
-    ValueError: unknown task, agent count out of range, unknown option.
+    ValueError: unknown task, agent count out of range, unknown option, an
+      option out of its range (e.g. `time_limit` not a finite number > 0).
     TypeError: non-integer agent count or seed.
   """
   cls, config_cls, default_agents = TASKS[_check_task(task)]
@@ -78,11 +118,20 @@ def load(task, n_agents=None, *, seed=None, time_limit=None, **kwargs):
         f"Unknown option(s) {unknown} for task {task!r}; allowed: "
         f"{sorted(config_fields | set(allowed_task_kwargs))}.")
   if time_limit is not None:
+    if isinstance(time_limit, bool) or not isinstance(time_limit,
+                                                      numbers.Real):
+      raise TypeError(f"time_limit must be a number of seconds or None, got "
+                      f"{time_limit!r}.")
+    # The task config checks the range (finite, > 0).
     config_kwargs["time_limit"] = float(time_limit)
   config = config_cls(**config_kwargs)
   task_instance = cls(n_agents, config=config, **task_kwargs)
-  return CoopEnvironment(task_instance, time_limit=config.time_limit,
-                         random_state=np.random.RandomState(seed))
+  env = CoopEnvironment(task_instance, time_limit=config.time_limit,
+                        random_state=np.random.RandomState(seed))
+  # What pickling and copying rebuild the environment from.
+  env.load_arguments = ((task, n_agents),
+                        dict(seed=seed, time_limit=time_limit, **kwargs))
+  return env
 
 
 def pettingzoo_env(task, n_agents=None, *, flatten=False, render_mode=None,

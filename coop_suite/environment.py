@@ -18,6 +18,12 @@ These things differ from a plain `composer.Environment`, each for a reason:
   buffering, no noise): composer's per-observable bookkeeping otherwise costs
   more than the physics. Any non-default observable restores composer's own
   updater, so its semantics are always preserved.
+* Pickling or copying (`pickle`, `copy.deepcopy`, cloudpickle in
+  SuperSuit's and RLlib's vector environments) rebuilds the environment from
+  its `coop_suite.load` arguments: composer's weak references cannot be
+  pickled, and a fresh build is what a vectorising client wants anyway.
+* `close()` may be called more than once (Gymnasium and SuperSuit call it
+  again on cleanup).
 * `step(action, observe=False)` skips building the observation of a step
   that does not end the episode, for callers that read only part of it from
   `task.features` (`CommandWrapper` runs the lower layer on proprioception
@@ -153,6 +159,26 @@ class CoopEnvironment(composer.Environment):
     self._substeps = None  # A _SubstepRunner, set at each reset.
     self._fuse = False  # Whether substeps run as one call; set at reset.
     self._time_up_at = None  # Physics time that ends the episode; at reset.
+    self.load_arguments = None  # Set by `coop_suite.load`; see `__reduce__`.
+
+  def __reduce__(self):
+    """Pickles as the `coop_suite.load` call that built this environment.
+
+    The copy is what `load` builds from the same arguments (task, agents,
+    seed, options): the current episode and the position in the random
+    stream are not carried over.
+    """
+    if self.load_arguments is None:
+      raise TypeError(
+          "Only environments built by coop_suite.load can be pickled or "
+          "copied (they are rebuilt from its arguments); pass a factory such "
+          "as `lambda: coop_suite.load(task, n_agents)` instead.")
+    return _rebuild, (self.load_arguments,)
+
+  def close(self):
+    """Frees the physics; a second call does nothing."""
+    if self._physics is not None:
+      super().close()
 
   def _make_observation_updater(self):
     return _LeanUpdater(self._task.observables,
@@ -262,6 +288,10 @@ class CoopEnvironment(composer.Environment):
     shape, low, high = self._action_bounds
     if (type(action) is np.ndarray and action.shape == shape  # pylint: disable=unidiomatic-typecheck
         and action.dtype.kind == "f"):
+      if action.dtype not in _KERNEL_DTYPES:
+        # float16, long double, big-endian...: the compiled kernel takes
+        # native float32/float64 only.
+        action = action.astype(np.float64)
       # Fast path for the common case: one float array for all agents
       # (every agent has the Ant's action spec), checked and clipped in one
       # compiled call.
@@ -281,6 +311,9 @@ class CoopEnvironment(composer.Environment):
       raise ValueError(f"Expected actions for {n} agents, got {len(action)}.")
     out = np.empty((n,) + specs[0].shape)
     for i, (agent_action, spec) in enumerate(zip(action, specs)):
+      if np.iscomplexobj(agent_action):
+        raise TypeError(f"Action of agent {i} is complex; expected real "
+                        "numbers.")
       try:
         values = np.asarray(agent_action, dtype=np.float64)
       except (TypeError, ValueError) as e:
@@ -298,6 +331,16 @@ class CoopEnvironment(composer.Environment):
     metrics = self.task.episode_metrics(self.physics)
     metrics["physics_diverged"] = self._physics_diverged
     return metrics
+
+
+_KERNEL_DTYPES = (np.dtype(np.float32), np.dtype(np.float64))
+
+
+def _rebuild(load_arguments):
+  """`CoopEnvironment.__reduce__`'s inverse: calls `coop_suite.load` again."""
+  import coop_suite  # pylint: disable=g-import-not-at-top
+  args, kwargs = load_arguments
+  return coop_suite.load(*args, **kwargs)
 
 
 def is_truncation(timestep: dm_env.TimeStep) -> bool:

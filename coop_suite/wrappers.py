@@ -69,6 +69,11 @@ def _box(shape, low=-np.inf, high=np.inf):
                     dtype=np.float32)
 
 
+def _rebuild(env, options):
+  """`ParallelEnv.__reduce__`'s inverse."""
+  return ParallelEnv(env, **options)
+
+
 class ParallelEnv(pettingzoo.ParallelEnv):
   """PettingZoo view of a `CoopEnvironment`; see the module docstring.
 
@@ -229,10 +234,19 @@ class ParallelEnv(pettingzoo.ParallelEnv):
                              height=height)
 
   def close(self):
-    """Frees the physics; the environment cannot be used afterwards."""
+    """Frees the physics; the environment cannot be used afterwards. A
+    second call does nothing (Gymnasium and SuperSuit close again on
+    cleanup)."""
     self.agents = []
-    if self.env.physics is not None:
-      self.env.close()
+    self.env.close()
+
+  def __reduce__(self):
+    """Pickles (and copies) as the `coop_suite.load` call of `env` plus this
+    adapter's options; the copy is a fresh build (see
+    `CoopEnvironment.__reduce__`)."""
+    return _rebuild, (self.env, {"flatten": self.flatten,
+                                 "render_mode": self.render_mode,
+                                 "render_size": self._render_size})
 
   # --- Internals ----------------------------------------------------------------
 

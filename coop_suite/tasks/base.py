@@ -75,6 +75,77 @@ class TaskConfig:
   keep paying most for staying at the goal. Success is counted, and its bonus
   paid, the first time it is reached either way."""
 
+  def __post_init__(self):
+    """Checks every field, the subclasses' included, before MuJoCo sees it.
+
+    Numbers must be finite; a field named after a size, mass, friction or
+    duration (`_POSITIVE`) must be > 0, one named after a speed, gap,
+    tolerance, time or distance (`_NON_NEGATIVE`) >= 0, and a tuple named
+    after a distance or range is a (low, high) pair with low <= high.
+    """
+    name_of = type(self).__name__
+    for field in dataclasses.fields(self):
+      _check_config_value(name_of, field.name, getattr(self, field.name),
+                          field.default)
+    ratio = self.control_timestep / self.physics_timestep
+    if ratio < 1 - 1e-9 or abs(ratio - round(ratio)) > 1e-6:
+      raise ValueError(
+          f"{name_of}.control_timestep ({self.control_timestep} s) must be "
+          f"a whole multiple of physics_timestep ({self.physics_timestep} "
+          "s).")
+
+
+# Field-name endings -> the range a value must lie in (see __post_init__).
+_POSITIVE = ("timestep", "time_limit", "period", "spacing", "width",
+             "thickness", "depth", "length", "mass", "radius", "friction",
+             "memory_mb_per_agent", "k_neighbours", "height_grid")
+_NON_NEGATIVE = ("speed", "gap", "tolerance", "time", "distance", "range")
+_RANGES = ("distance", "range")  # Tuples named so are (low, high).
+
+
+def _check_config_value(config_name, name, value, default):
+  """Raises a ValueError/TypeError naming `config_name.name` if `value` is
+  not of `default`'s kind or out of the range its name implies."""
+  where = f"{config_name}.{name}"
+  if isinstance(default, bool):
+    if not isinstance(value, (bool, np.bool_)):
+      raise TypeError(f"{where} must be True or False, got {value!r}.")
+    return
+  if isinstance(default, tuple):
+    is_range = name.endswith(_RANGES)
+    if (not isinstance(value, (tuple, list))
+        or not all(_is_real(v) for v in value)
+        or (is_range and len(value) != 2)):
+      kind = "a (low, high) pair" if is_range else "a tuple"
+      raise TypeError(f"{where} must be {kind} of numbers, got {value!r}.")
+    for v in value:
+      _check_number(where, name, v)
+    if is_range and value[0] > value[1]:
+      raise ValueError(f"{where} must have low <= high, got {value!r}.")
+    return
+  if not isinstance(default, (int, float)):
+    return  # Not a number: the task checks it.
+  integral = isinstance(default, int)
+  if not _is_real(value) or (integral and not isinstance(
+      value, (int, np.integer))):
+    kind = "an integer" if integral else "a number"
+    raise TypeError(f"{where} must be {kind}, got {value!r}.")
+  _check_number(where, name, value)
+
+
+def _is_real(value):
+  return (isinstance(value, (int, float, np.integer, np.floating))
+          and not isinstance(value, (bool, np.bool_)))
+
+
+def _check_number(where, name, value):
+  if not np.isfinite(value):
+    raise ValueError(f"{where} must be finite, got {value!r}.")
+  if name.endswith(_POSITIVE) and value <= 0:
+    raise ValueError(f"{where} must be > 0, got {value!r}.")
+  if name.endswith(_NON_NEGATIVE) and value < 0:
+    raise ValueError(f"{where} must be >= 0, got {value!r}.")
+
 
 class CoopTask(composer.Task):
   """A cooperative task for `len(species)` Ants; see the module docstring."""

@@ -81,10 +81,12 @@ class Ravine(base.CoopTask):
                n_pushers=2):
     if stage not in STAGES:
       raise ValueError(f"Unknown stage {stage!r}; choose one of {STAGES}.")
-    if (isinstance(n_pushers, bool) or not isinstance(n_pushers, int)
+    if (isinstance(n_pushers, (bool, np.bool_))
+        or not isinstance(n_pushers, (int, np.integer))
         or not 1 <= n_pushers <= 4):
       raise ValueError(f"n_pushers must be an integer in [1, 4], got "
                        f"{n_pushers!r}.")
+    n_pushers = int(n_pushers)  # NumPy integers too (e.g. from a sweep).
     if config.success not in SUCCESS_RULES:
       raise ValueError(f"Unknown success rule {config.success!r}; choose one "
                        f"of {SUCCESS_RULES}.")
