@@ -31,22 +31,26 @@ def save_state(path: str, state: Any, kind: str, format_version: int) -> None:
   os.replace(tmp_path, path)
 
 
-def restore_state(path: str, template: Any, kind: str,
-                  format_version: int) -> Any:
-  """Reads a file written by `save_state` into the structure of `template`.
+def read(path: str, kind: str) -> tuple[int, Any]:
+  """(format version, state dict) of a file written by `save_state`.
 
-  Raises ValueError when the file is of another kind or format, or holds
-  arrays of other shapes than `template` (other networks or config).
+  Raises ValueError when the file is of another kind. Learners that still
+  read an older format convert its state dict themselves.
   """
   with open(path, 'rb') as f:
     contents = serialization.msgpack_restore(f.read())
   # Files written before `kind` existed (early PPO checkpoints) carry none.
-  if (contents.get('format') != format_version
-      or contents.get('kind', kind) != kind):
-    raise ValueError(f'{path} is not a {kind} checkpoint of format '
-                     f'{format_version}.')
+  if contents.get('kind', kind) != kind:
+    raise ValueError(f'{path} is not a {kind} checkpoint (it is a '
+                     f'{contents.get("kind")} one).')
+  return contents.get('format'), contents['state']
+
+
+def from_state_dict(path: str, template: Any, state_dict: Any) -> Any:
+  """`state_dict` in the structure of `template`; ValueError (naming `path`)
+  when the structure or an array's shape differs."""
   try:
-    state = serialization.from_state_dict(template, contents['state'])
+    state = serialization.from_state_dict(template, state_dict)
   except ValueError as e:
     raise ValueError(f'{path} holds another state structure; was it written '
                      f'with different networks or config? ({e})') from None
@@ -55,3 +59,17 @@ def restore_state(path: str, template: Any, kind: str,
     raise ValueError(f'{path} holds arrays of other shapes; was it written '
                      'with different networks or config?')
   return state
+
+
+def restore_state(path: str, template: Any, kind: str,
+                  format_version: int) -> Any:
+  """Reads a file written by `save_state` into the structure of `template`.
+
+  Raises ValueError when the file is of another kind or format, or holds
+  arrays of other shapes than `template` (other networks or config).
+  """
+  file_format, state_dict = read(path, kind)
+  if file_format != format_version:
+    raise ValueError(f'{path} is not a {kind} checkpoint of format '
+                     f'{format_version} (it has format {file_format}).')
+  return from_state_dict(path, template, state_dict)

@@ -80,6 +80,15 @@ def normalize(state: NormalizerState, x: jax.Array,
   return jnp.clip(normalized, -clip, clip)
 
 
+def denormalize(state: NormalizerState, x: jax.Array) -> jax.Array:
+  """The inverse of an unclipped `normalize`: x * std + mean, [..., dim].
+
+  Value normalisation (`agents.ppo.returns`) reads a critic that predicts
+  standardised returns back in return units with it.
+  """
+  return x * jnp.sqrt(state.var + _EPSILON) + state.mean
+
+
 def make_preprocess_fn(
     enabled: bool, clip: float = 5.0
 ) -> Callable[[NormalizerState, jax.Array], jax.Array]:

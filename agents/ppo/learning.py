@@ -20,6 +20,8 @@ from agents import normalization
 from agents.networks import policy_value
 from agents.ppo import config as ppo_config
 from agents.ppo import losses
+from agents.ppo import returns
+from agents.ppo import step_size
 from agents.ppo import types
 
 _CHECKPOINT_FORMAT = 1
@@ -45,10 +47,8 @@ class TrainingState(NamedTuple):
 
 def make_optimizer(
     config: ppo_config.PPOConfig) -> optax.GradientTransformation:
-  """Adam after global-norm gradient clipping."""
-  return optax.chain(
-      optax.clip_by_global_norm(config.max_grad_norm),
-      optax.adam(config.learning_rate, eps=config.adam_epsilon))
+  """Adam after global-norm gradient clipping (`step_size.make_optimizer`)."""
+  return step_size.make_optimizer(config)
 
 
 def loss_options(config) -> dict:
@@ -60,11 +60,16 @@ def loss_options(config) -> dict:
               normalize_advantages=config.normalize_advantages)
 
 
-def make_sgd_step(loss_fn, optimizer: optax.GradientTransformation):
+def make_sgd_step(loss_fn, optimizer: optax.GradientTransformation,
+                  target_kl: float = 0.0):
   """One minibatch gradient step, shaped for `jax.lax.scan` over minibatches.
 
-  `loss_fn(params, minibatch, key) -> (loss, metrics)`; the step's carry is
-  `(params, opt_state)` and its input `(minibatch, key)`.
+  `loss_fn(params, minibatch, key) -> (loss, metrics)` with an 'approx_kl'
+  metric; the step's carry is `(params, opt_state)` and its input
+  `(minibatch, key)`. With `target_kl > 0` (and `optimizer` from
+  `step_size.make_optimizer`), the minibatch's KL sets the learning rate of
+  the next step (`step_size.adapt`); the metric 'learning_rate' is the rate
+  this step used.
   """
   def sgd_step(carry, minibatch_and_key):
     params, opt_state = carry
@@ -72,6 +77,9 @@ def make_sgd_step(loss_fn, optimizer: optax.GradientTransformation):
     grads, metrics = jax.grad(loss_fn, has_aux=True)(params, minibatch, key)
     metrics['grad_norm'] = optax.tree.norm(grads)  # Before clipping.
     updates, opt_state = optimizer.update(grads, opt_state, params)
+    if target_kl > 0:
+      metrics['learning_rate'] = step_size.learning_rate(opt_state)
+      opt_state = step_size.adapt(opt_state, metrics['approx_kl'], target_kl)
     return (optax.apply_updates(params, updates), opt_state), metrics
   return sgd_step
 
@@ -104,22 +112,15 @@ def make_update_fn(networks: policy_value.PolicyValueNetworks,
   def make_training_batch(params, normalizer, rollout) -> types.TrainingBatch:
     observation = preprocess(normalizer, rollout.observation)  # [T+1, B, D]
     values = networks.apply_value(params, observation)  # [T+1, B]
-    rewards = rollout.reward * config.reward_scaling
-    discounts = config.discount * rollout.discount
-    if rollout.truncation is not None:
-      # The final observation of a truncated episode is gone (observation[t+1]
-      # already starts the next one): bootstrap with V(observation[t]) instead
-      # and cut the trace so nothing leaks across episodes. `discounts` is
-      # already 0 where the episode also terminated: no bootstrap there.
-      truncated = rollout.truncation.astype(rewards.dtype)
-      rewards = rewards + truncated * discounts * values[:-1]
-      discounts = discounts * (1.0 - truncated)
-    advantages, returns = losses.compute_gae(
-        rewards, values[:-1], discounts, values[-1], config.gae_lambda)
+    targets = returns.compute_targets(
+        values, rollout.reward * config.reward_scaling,
+        config.discount * rollout.discount, rollout.truncation, None,
+        config.gae_lambda)
     return types.TrainingBatch(
         observation=observation[:-1], raw_action=rollout.raw_action,
-        behaviour_log_prob=rollout.log_prob, behaviour_value=values[:-1],
-        advantage=advantages, target_value=returns)
+        behaviour_log_prob=rollout.log_prob,
+        behaviour_value=targets.behaviour_value,
+        advantage=targets.advantage, target_value=targets.target_value)
 
   def loss_fn(params, batch, key):
     dist_params = networks.apply_policy(params, batch.observation)

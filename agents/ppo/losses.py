@@ -80,7 +80,8 @@ def ppo_loss(
   Returns:
     (scalar loss, metrics dict of scalars): total_loss, policy_loss,
     value_loss, entropy, approx_kl (the low-variance k3 estimator of
-    KL(behaviour || current)) and clip_fraction.
+    KL(behaviour || current)), clip_fraction and action_std (the mean
+    pre-tanh standard deviation).
   """
   advantages = batch.advantage
   if normalize_advantages:
@@ -113,5 +114,6 @@ def ppo_loss(
       'approx_kl': jnp.mean((ratio - 1.0) - log_ratio),
       'clip_fraction': jnp.mean(
           (jnp.abs(ratio - 1.0) > clip_epsilon).astype(jnp.float32)),
+      'action_std': jnp.mean(distribution.loc_and_scale(dist_params)[1]),
   }
   return total_loss, metrics
