@@ -1,13 +1,17 @@
 """Hyper-parameters of the hierarchical agent, one frozen dataclass.
 
-Defaults are the paper's where it gives them (section 5: IPPO, Adam lr 5e-4,
-PPO clip 0.2, discount 0.995); the others follow PureJaxRL's `ppo_rnn` and the
-project's PPO (`agents.ppo.config`). One config describes one species; the
-runner makes a learner and actor per species.
+Defaults are the paper's where it gives them (section 5: IPPO, Adam lr 5e-4
+to start from, PPO clip 0.2); the stability settings (value normalisation, a
+critic of its own, KL-adaptive learning rate, std floor, discount per
+command) are explained in docs/training.md, "Stability"; the others follow
+PureJaxRL's `ppo_rnn` and the project's PPO (`agents.ppo.config`). One
+config describes one species; the runner makes a learner and actor per
+species.
 """
 import dataclasses
 
 AGENTS = ('hrl', 'no_memory', 'flat', 'mappo')
+CRITICS = ('separate', 'stop_gradient', 'shared')
 
 
 @dataclasses.dataclass(frozen=True)
@@ -18,15 +22,30 @@ class HierarchyConfig:
   """Variant (paper section 6 ablations): 'hrl' = UL MLP + ML GRU (default);
   'no_memory' = an MLP in place of the GRU (Nachum et al. 2019); 'flat' = one
   MLP from proprio + extero to the joint actions, no lower layer; 'mappo' =
-  'hrl' whose value head reads the global state (centralised critic)."""
+  'hrl' whose critic also reads the global state (centralised critic)."""
+  critic: str = 'separate'
+  """How the critic relates to the policy's upper and middle layers, the same
+  for 'hrl', 'no_memory' and 'mappo' ('flat' always has its own value MLP):
+  'separate' = an upper and middle layer of its own (the value loss cannot
+  move the policy's parameters); 'stop_gradient' = the value head reads the
+  policy's middle-layer features through a stop-gradient; 'shared' = the
+  value head trains the policy's trunk too (the layout of the first
+  transport run, which collapsed; kept to reproduce it)."""
 
   # Optimisation.
   learning_rate: float = 5e-4
-  """Adam step size (paper)."""
+  """Adam step size at the start (paper); then adapted, see `target_kl`."""
+  target_kl: float = 0.008
+  """KL-adaptive learning rate (the paper's rl_games, `agents.ppo.step_size`):
+  after each minibatch the rate is divided by 1.5 if its approximate KL to
+  the behaviour policy is above 2 x target_kl and multiplied by 1.5 below
+  target_kl / 2. 0 keeps `learning_rate` constant."""
   adam_epsilon: float = 1e-5
   """Adam's denominator epsilon (CleanRL / PureJaxRL)."""
-  max_grad_norm: float = 0.5
-  """Gradients are rescaled to at most this global L2 norm."""
+  max_grad_norm: float = 1.0
+  """Gradients are rescaled to at most this global L2 norm. With normalised
+  advantages and values both losses are O(1) and so are their gradients; 1.0
+  (rl_games' Ant setting) clips outliers, not every step."""
   num_epochs: int = 4
   """Passes over each batch of sequences."""
   num_minibatches: int = 4
@@ -34,22 +53,33 @@ class HierarchyConfig:
   whole), which must divide by it."""
 
   # PPO objective.
-  discount: float = 0.995
-  """Per-command discount gamma (paper); multiplied by the 0/1 env discount.
-  Per command, not per low-level step: with a 0.5 s command period the horizon
-  1 / (1 - gamma) is 200 commands = 100 s."""
+  discount: float = 0.99
+  """Per-command discount gamma; multiplied by the 0/1 env discount. The
+  paper's 0.995 is per simulator step; per 0.5 s command it would be a
+  horizon 1 / (1 - gamma) of 200 commands = 100 s, beyond a 40 s episode.
+  0.99 is 100 commands = 50 s: a success at an episode's end is still worth
+  0.99^80 = 0.45 of itself at its start, and returns stay ~2x shorter."""
   gae_lambda: float = 0.95
   """GAE lambda: 0 is one-step TD, 1 is Monte-Carlo returns."""
   clip_epsilon: float = 0.2
   """PPO trust region: ratios clipped to [1 - eps, 1 + eps] (paper)."""
   clip_value_loss: bool = False
   """Also clip value updates to +-clip_epsilon (CleanRL's option)."""
-  entropy_cost: float = 1e-3
-  """Weight of the entropy bonus. The paper gives none; 1e-3 (ten times below
-  the lower layer's 1e-2) because the command has only 2 dimensions and a
-  state-independent std, which a larger bonus keeps wide for too long."""
+  entropy_cost: float = 1e-2
+  """Weight of the entropy bonus (Brax's and the lower layer's). 1e-3 was
+  30-60x weaker than the policy loss and the std fell 0.69 -> 0.03 in the
+  first transport run; with 1e-2 and `min_action_std` exploration stays."""
+  min_action_std: float = 0.1
+  """Floor of the command's std in pre-tanh units (softplus(s) + floor):
+  the policy's sensitivity to a parameter step grows as 1 / std, so a
+  collapsing std made every update larger. Evaluation acts with the mean."""
   value_cost: float = 0.5
-  """Weight of the value loss 0.5 * (return - value)^2."""
+  """Weight of the value loss 0.5 * (target - value)^2, in normalised units
+  when `normalize_values`."""
+  normalize_values: bool = True
+  """The critic predicts returns standardised by running statistics of all
+  value targets (MAPPO's ValueNorm, `agents.ppo.returns`), saved with the
+  learner state."""
   normalize_advantages: bool = True
   """Standardise advantages within each minibatch."""
   reward_scaling: float = 0.01
@@ -59,10 +89,11 @@ class HierarchyConfig:
   policy barely moves (measured: approx_kl ~1e-4 per update)."""
 
   # Data.
-  sequence_length: int = 16
+  sequence_length: int = 32
   """T, commands per training sequence (truncated BPTT length): the actor
   hands over a `SequenceBatch` every T commands, its GRU state stored at the
-  start of the sequence. 16 commands = 8 s at a 0.5 s command period."""
+  start of the sequence. 32 commands = 16 s at a 0.5 s command period; with
+  2 actors x 16 copies x 4 agents an update sees 4,096 commands."""
   normalize_observations: bool = True
   """Standardise observations and the global state with running statistics
   (`agents.normalization`), updated by the learner before each update."""
@@ -81,10 +112,10 @@ class HierarchyConfig:
   actor and learner handle one carry shape."""
   head_sizes: tuple[int, ...] = (128,)
   """Hidden widths of the command head and the value head on top of the ML
-  (PureJaxRL's separate actor / critic MLPs after the shared GRU)."""
+  (the critic's own ML with `critic='separate'`)."""
   critic_sizes: tuple[int, ...] = (128, 128)
-  """'mappo': hidden widths of the centralised critic MLP over the global
-  state."""
+  """'mappo': widths of the MLP over the global state whose features join
+  the critic's middle-layer features before the value head."""
   flat_sizes: tuple[int, ...] = (256, 256)
   """'flat': hidden widths of its policy MLP and its separate value MLP (the
   lower layer's own architecture, `agents.ppo` defaults)."""
@@ -110,13 +141,16 @@ class HierarchyConfig:
 
   @property
   def uses_global_state(self) -> bool:
-    """Whether the value head reads a `global_state` input."""
+    """Whether the critic reads a `global_state` input."""
     return self.agent == 'mappo'
 
   def __post_init__(self):
     if self.agent not in AGENTS:
       raise ValueError(f'HierarchyConfig.agent must be one of {AGENTS}, got '
                        f'{self.agent!r}.')
+    if self.critic not in CRITICS:
+      raise ValueError(f'HierarchyConfig.critic must be one of {CRITICS}, '
+                       f'got {self.critic!r}.')
     positive = ('learning_rate', 'adam_epsilon', 'clip_epsilon',
                 'max_grad_norm', 'num_epochs', 'num_minibatches',
                 'reward_scaling', 'observation_clip', 'sequence_length',
@@ -129,7 +163,7 @@ class HierarchyConfig:
       if not 0.0 <= getattr(self, name) <= 1.0:
         raise ValueError(f'HierarchyConfig.{name} must be in [0, 1], got '
                          f'{getattr(self, name)!r}.')
-    for name in ('entropy_cost', 'value_cost'):
+    for name in ('entropy_cost', 'value_cost', 'target_kl', 'min_action_std'):
       if getattr(self, name) < 0:
         raise ValueError(f'HierarchyConfig.{name} must be >= 0, got '
                          f'{getattr(self, name)!r}.')

@@ -4,8 +4,10 @@
 statistics, one replay of every sequence for values and GAE, then epochs x
 minibatches of SGD where each minibatch re-unrolls the ML from the stored
 `initial_carry` (PureJaxRL `ppo_rnn`). Minibatches permute the batch axis B
-only, so sequences stay whole. `HierarchyLearner` wraps it with Acme's
-Learner interface and checkpoint files; it mirrors `agents.ppo.learning`.
+only, so sequences stay whole. Value targets come from `agents.ppo.returns`
+(value normalisation), the step size from `agents.ppo.step_size`
+(KL-adaptive learning rate). `HierarchyLearner` wraps it with Acme's Learner
+interface and checkpoint files; it mirrors `agents.ppo.learning`.
 """
 from typing import Any, Iterator, NamedTuple, Optional, Sequence
 
@@ -17,13 +19,18 @@ from agents import checkpointing
 from agents import core
 from agents import normalization
 from agents.hierarchy import config as hierarchy_config
+from agents.hierarchy import legacy
 from agents.hierarchy import networks as hierarchy_networks
 from agents.hierarchy import types
 from agents.ppo import learning as ppo_learning
 from agents.ppo import losses
+from agents.ppo import returns
+from agents.ppo import step_size
 from agents.ppo import types as ppo_types
 
-_CHECKPOINT_FORMAT = 1
+# 2: value normaliser and adaptive learning rate in the state, critic layouts
+# (format 1 files are converted by `agents.hierarchy.legacy`).
+_CHECKPOINT_FORMAT = 2
 
 
 class TrainingState(NamedTuple):
@@ -31,10 +38,14 @@ class TrainingState(NamedTuple):
 
   Attributes:
     params: network parameters (Flax variables).
-    opt_state: optax state of the optimiser chain.
+    opt_state: optax state of the optimiser chain (with the adapted
+      learning rate when `target_kl > 0`).
     normalizer: observation statistics used by the current params.
     global_state_normalizer: global-state statistics ('mappo'; for the other
       variants 0-dimensional and never updated).
+    value_normalizer: [1]-dimensional statistics of the value targets, which
+      the critic predicts standardised (never updated without
+      `normalize_values`).
     step: number of updates done, int32 scalar.
     key: PRNG key (raw uint32 [2]) for shuffling and entropy estimates.
   """
@@ -42,14 +53,15 @@ class TrainingState(NamedTuple):
   opt_state: optax.OptState
   normalizer: normalization.NormalizerState
   global_state_normalizer: normalization.NormalizerState
+  value_normalizer: normalization.NormalizerState
   step: jax.Array
   key: jax.Array
 
 
 def make_optimizer(
     config: hierarchy_config.HierarchyConfig) -> optax.GradientTransformation:
-  """Adam after global-norm gradient clipping, as the PPO learner's."""
-  return ppo_learning.make_optimizer(config)
+  """Adam after global-norm gradient clipping, KL-adaptive learning rate."""
+  return step_size.make_optimizer(config)
 
 
 def make_initial_state(networks: hierarchy_networks.HierarchyNetworks,
@@ -63,6 +75,7 @@ def make_initial_state(networks: hierarchy_networks.HierarchyNetworks,
       normalizer=normalization.init(networks.observation_size),
       global_state_normalizer=normalization.init(
           networks.global_state_size or 0),
+      value_normalizer=normalization.init(1),
       step=jnp.zeros((), jnp.int32), key=key)
 
 
@@ -96,36 +109,38 @@ def make_update_fn(networks: hierarchy_networks.HierarchyNetworks,
   """Builds the pure `update(state, batch) -> (state, metrics)`; jit it.
 
   `batch` is a `types.SequenceBatch` of T commands of B agents. Metrics are
-  means over all SGD steps (see `agents.ppo.losses.ppo_loss`).
+  means over all SGD steps (see `agents.ppo.losses.ppo_loss`), plus
+  'learning_rate' (mean rate of the steps) and 'explained_variance' of the
+  values that made the targets.
   """
   preprocess = normalization.make_preprocess_fn(
       config.normalize_observations, config.observation_clip)
   uses_global_state = networks.global_state_size is not None
 
-  def make_training_batch(params, normalizer, gs_normalizer, batch):
+  def make_training_batch(params, normalizer, gs_normalizer,
+                          value_normalizer, batch):
+    """(SequenceTrainingBatch, returns.Targets) of `batch`."""
     observation = preprocess(normalizer, batch.observation)  # [T+1, B, D]
     global_state = (preprocess(gs_normalizer, batch.global_state)
                     if uses_global_state else None)
     # One replay of T + 1 steps gives the values and the bootstrap value.
     _, _, values = networks.unroll(params, batch.initial_carry, observation,
                                    batch.reset, global_state)  # [T+1, B]
-    rewards = batch.reward * config.reward_scaling
-    discounts = config.discount * batch.discount
-    if batch.truncation is not None:
-      # As in agents.ppo.learning: bootstrap a cut episode with V(obs[t]).
-      truncated = batch.truncation.astype(rewards.dtype)
-      rewards = rewards + truncated * discounts * values[:-1]
-      discounts = discounts * (1.0 - truncated)
-    advantages, returns = losses.compute_gae(
-        rewards, values[:-1], discounts, values[-1], config.gae_lambda)
+    targets = returns.compute_targets(
+        values, batch.reward * config.reward_scaling,
+        config.discount * batch.discount, batch.truncation,
+        value_normalizer if config.normalize_values else None,
+        config.gae_lambda)
     steps = ppo_types.TrainingBatch(
         observation=observation[:-1], raw_action=batch.raw_action,
-        behaviour_log_prob=batch.log_prob, behaviour_value=values[:-1],
-        advantage=advantages, target_value=returns)
+        behaviour_log_prob=batch.log_prob,
+        behaviour_value=targets.behaviour_value,
+        advantage=targets.advantage, target_value=targets.target_value)
     return types.SequenceTrainingBatch(
         steps=steps, reset=batch.reset[:-1],
         initial_carry=batch.initial_carry,
-        global_state=None if global_state is None else global_state[:-1])
+        global_state=None if global_state is None else global_state[:-1]
+    ), targets
 
   def loss_fn(params, minibatch: types.SequenceTrainingBatch, key):
     # Truncated BPTT: gradients flow through the T steps of the sequence but
@@ -137,7 +152,7 @@ def make_update_fn(networks: hierarchy_networks.HierarchyNetworks,
                            networks.distribution, key,
                            **ppo_learning.loss_options(config))
 
-  sgd_step = ppo_learning.make_sgd_step(loss_fn, optimizer)
+  sgd_step = ppo_learning.make_sgd_step(loss_fn, optimizer, config.target_kl)
 
   def epoch(carry, key, batch: types.SequenceTrainingBatch):
     permutation_key, loss_key = jax.random.split(key)
@@ -170,15 +185,21 @@ def make_update_fn(networks: hierarchy_networks.HierarchyNetworks,
         gs_normalizer = normalization.update(gs_normalizer,
                                              batch.global_state[:-1])
     key, epochs_key = jax.random.split(state.key)
-    training_batch = make_training_batch(state.params, normalizer,
-                                         gs_normalizer, batch)
+    training_batch, targets = make_training_batch(
+        state.params, normalizer, gs_normalizer, state.value_normalizer,
+        batch)
     (params, opt_state), metrics = jax.lax.scan(
         lambda carry, key: epoch(carry, key, training_batch),
         (state.params, state.opt_state),
         jax.random.split(epochs_key, config.num_epochs))
     metrics = jax.tree.map(jnp.mean, metrics)
+    metrics['explained_variance'] = targets.explained_variance
+    if 'learning_rate' not in metrics:  # Constant rate (target_kl = 0).
+      metrics['learning_rate'] = jnp.float32(config.learning_rate)
+    value_normalizer = (targets.value_normalizer if config.normalize_values
+                        else state.value_normalizer)
     return TrainingState(params, opt_state, normalizer, gs_normalizer,
-                         state.step + 1, key), metrics
+                         value_normalizer, state.step + 1, key), metrics
 
   return update
 
@@ -201,6 +222,7 @@ class HierarchyLearner(core.Learner):
     if key is None:
       key = jax.random.PRNGKey(config.seed)
     self._state = make_initial_state(networks, optimizer, key)
+    self._optimizer = optimizer
     self._update = jax.jit(make_update_fn(networks, config, optimizer))
     self._batches = batches
     # The variant is part of the file's kind: an 'hrl' file never loads into
@@ -245,6 +267,18 @@ class HierarchyLearner(core.Learner):
                              _CHECKPOINT_FORMAT)
 
   def restore(self, path: str) -> None:
-    """Loads a file written by `save` with the same networks and config."""
-    self._state = checkpointing.restore_state(
-        path, self._state, self._checkpoint_kind, _CHECKPOINT_FORMAT)
+    """Loads a file written by `save` with the same networks and config.
+
+    Files of the first layout (format 1: shared critic, no value statistics)
+    are converted (`agents.hierarchy.legacy`): the policy exactly, a
+    separate critic as a copy of the shared trunk, a fresh optimiser.
+    """
+    file_format, state_dict = checkpointing.read(path, self._checkpoint_kind)
+    if file_format == legacy.FORMAT:
+      state_dict = legacy.convert(state_dict, self._state, self._optimizer)
+    elif file_format != _CHECKPOINT_FORMAT:
+      raise ValueError(f'{path} is a {self._checkpoint_kind} checkpoint of '
+                       f'format {file_format}; this version reads formats '
+                       f'{legacy.FORMAT} and {_CHECKPOINT_FORMAT}.')
+    self._state = checkpointing.from_state_dict(path, self._state,
+                                                state_dict)

@@ -65,9 +65,17 @@ class HierarchyPolicyValue(nn.Module):
   """Policy (command) and value of one species, all variants in one module.
 
   'hrl' / 'no_memory' / 'mappo': observation (exteroception) -> UL MLP ->
-  ML -> command head and value head ('mappo': value from the global state).
-  'flat': observation (proprio + extero) -> policy MLP and a separate value
-  MLP (Brax's layout for the lower layer); the carry passes through.
+  ML -> command head. The critic (`critic`, see `HierarchyConfig.critic`)
+  reads, by the value head, either features of an UL and ML of its own
+  ('separate'; its ML state is the second half of the carry), the policy's
+  ML features through a stop-gradient ('stop_gradient') or the policy's ML
+  features ('shared'). 'mappo' adds features of the global state to the
+  critic's. 'flat': observation (proprio + extero) -> policy MLP and a
+  separate value MLP (Brax's layout for the lower layer); the carry passes
+  through.
+
+  The policy's parameter names are those of every earlier layout, so older
+  checkpoints' policies load into any critic structure.
   """
   agent: str
   action_size: int
@@ -78,6 +86,7 @@ class HierarchyPolicyValue(nn.Module):
   flat_sizes: Sequence[int]
   activation: str = 'swish'
   state_dependent_std: bool = False
+  critic: str = 'separate'
 
   @nn.compact
   def __call__(self, carry, observation, reset,
@@ -85,39 +94,52 @@ class HierarchyPolicyValue(nn.Module):
     """Unrolls T commands.
 
     Args:
-      carry: [B, H] ML state before step 0 (before reset[0] applies).
+      carry: [B, C] ML state before step 0 (before reset[0] applies); C = H,
+        or 2H with a separate recurrent critic (policy's, critic's).
       observation: [T, B, D] normalised observations.
       reset: [T, B] bool, true where observation[t] starts an episode.
       global_state: [T, B, S] normalised global state ('mappo' only).
 
     Returns:
-      (carry [B, H] after step T - 1, dist_params [T, B, 2A], value [T, B]).
+      (carry [B, C] after step T - 1, dist_params [T, B, 2A], value [T, B]).
     """
     head_outputs = (2 * self.action_size if self.state_dependent_std
                     else self.action_size)
     mlp_ = functools.partial(mlp.MLP, activation=self.activation)
+
+    def trunk(prefix, carry):  # UL + ML -> (carry, features [T, B, H]).
+      features = mlp_(self.upper_layer_sizes, activate_final=True,
+                      name=f'{prefix}upper_layer')(observation)
+      return MiddleLayer(
+          self.middle_layer_size, recurrent=self.agent != 'no_memory',
+          activation=self.activation, name=f'{prefix}middle_layer')(
+              carry, features, reset)
+
     if self.agent == 'flat':
       policy_out = mlp_((*self.flat_sizes, head_outputs),
                         final_kernel_scale=_POLICY_HEAD_SCALE,
                         name='policy')(observation)
       value = mlp_((*self.flat_sizes, 1), name='value')(observation)
     else:
-      features = mlp_(self.upper_layer_sizes, activate_final=True,
-                      name='upper_layer')(observation)
-      carry, features = MiddleLayer(
-          self.middle_layer_size, recurrent=self.agent != 'no_memory',
-          activation=self.activation, name='middle_layer')(
-              carry, features, reset)
+      size = self.middle_layer_size
+      policy_carry, features = trunk('', carry[:, :size])
       policy_out = mlp_((*self.head_sizes, head_outputs),
                         final_kernel_scale=_POLICY_HEAD_SCALE,
                         name='command_head')(features)
+      if self.critic == 'separate':
+        critic_carry, critic_features = trunk('critic_', carry[:, size:])
+        carry = jnp.concatenate([policy_carry, critic_carry], -1)
+      else:
+        carry = policy_carry
+        critic_features = (jax.lax.stop_gradient(features)
+                           if self.critic == 'stop_gradient' else features)
       if self.agent == 'mappo':
         if global_state is None:
           raise ValueError("agent='mappo' needs a global_state input.")
-        value = mlp_((*self.critic_sizes, 1),
-                     name='centralised_critic')(global_state)
-      else:
-        value = mlp_((*self.head_sizes, 1), name='value_head')(features)
+        critic_features = jnp.concatenate([critic_features, mlp_(
+            self.critic_sizes, activate_final=True,
+            name='global_state_encoder')(global_state)], -1)
+      value = mlp_((*self.head_sizes, 1), name='value_head')(critic_features)
     if self.state_dependent_std:
       dist_params = policy_out
     else:

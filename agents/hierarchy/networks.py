@@ -30,19 +30,21 @@ class HierarchyNetworks:
 
   Attributes:
     init: key -> params.
-    unroll: (params, carry [B, H], observation [T, B, D], reset [T, B],
-      global_state [T, B, S] or None) -> (carry [B, H] after the last step,
+    unroll: (params, carry [B, C], observation [T, B, D], reset [T, B],
+      global_state [T, B, S] or None) -> (carry [B, C] after the last step,
       dist_params [T, B, 2A], value [T, B]). The carry is replaced by the
       initial one at every step whose reset is true, before that step.
-    step: the same for one command: (params, carry [B, H], observation
-      [B, D], reset [B], global_state [B, S] or None) -> (carry [B, H],
+    step: the same for one command: (params, carry [B, C], observation
+      [B, D], reset [B], global_state [B, S] or None) -> (carry [B, C],
       dist_params [B, 2A], value [B]).
-    initial_carry: batch size B -> [B, H] zeros, the carry of a fresh episode.
+    initial_carry: batch size B -> [B, C] zeros, the carry of a fresh episode.
     distribution: reads `dist_params` (sample, log_prob, entropy).
     agent: the `HierarchyConfig.agent` variant.
     observation_size: D.
     action_size: A (2 for a command, 8 joint actions for 'flat').
-    carry_size: H (carried but unused by 'no_memory' and 'flat').
+    carry_size: C = H, or 2H with a separate critic (the policy's middle
+      layer state, then the critic's); carried but unused by 'no_memory'
+      and 'flat'.
     global_state_size: S for 'mappo', else None (global state is ignored).
   """
   init: Callable[[jax.Array], Params]
@@ -83,8 +85,10 @@ def make_hierarchy_networks(
       middle_layer_size=config.middle_layer_size,
       head_sizes=config.head_sizes, critic_sizes=config.critic_sizes,
       flat_sizes=config.flat_sizes, activation=config.activation,
-      state_dependent_std=config.state_dependent_std)
-  carry_size = config.middle_layer_size
+      state_dependent_std=config.state_dependent_std, critic=config.critic)
+  # A separate critic carries its own middle-layer state after the policy's.
+  carry_size = config.middle_layer_size * (
+      2 if config.critic == 'separate' and config.agent != 'flat' else 1)
 
   def initial_carry(batch_size: int) -> jax.Array:
     return jnp.zeros((batch_size, carry_size), jnp.float32)
@@ -110,6 +114,7 @@ def make_hierarchy_networks(
 
   return HierarchyNetworks(
       init=init, unroll=unroll, step=step, initial_carry=initial_carry,
-      distribution=distributions.NormalTanhDistribution(action_dim),
+      distribution=distributions.NormalTanhDistribution(
+          action_dim, min_std=config.min_action_std),
       agent=config.agent, observation_size=obs_dim, action_size=action_dim,
       carry_size=carry_size, global_state_size=global_state_dim)
