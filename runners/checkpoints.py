@@ -8,9 +8,13 @@ One checkpoint is one directory, `<logdir>/checkpoints/ckpt_<iteration>/`:
                       restarts), the run's `TrainArgs`, the agent's
                       `HierarchyConfig` and the species layout
 
-It is written into a temporary sibling directory and renamed into place, so
-a crash leaves either the whole checkpoint or none; the newest `keep` are
-kept. `--resume` and `coop-eval` read the newest complete one.
+It is written into a temporary sibling directory and renamed into place
+(`run_dir.replace_directory`), so a kill at any instant leaves either the
+whole checkpoint or none, and a checkpoint written again (`best/`, or the
+same iteration after a resume) is never lost in between; the newest `keep`
+are kept. `--resume` and `coop-eval` read the newest checkpoint that reads
+completely (`resolve`): one damaged by something else (a full disk, a
+copy cut short) is named and passed over for the one before it.
 
 `<logdir>/checkpoints/best/` (with `--keep-best`) is a checkpoint of the same
 form holding the iteration whose episode window scored best (`save_best`);
@@ -20,7 +24,10 @@ import glob
 import json
 import os
 import shutil
-from typing import Any, Mapping
+import sys
+from typing import Any, Callable, Mapping
+
+from runners import run_dir
 
 FORMAT = 1
 STATE_FILE = 'state.json'
@@ -28,12 +35,16 @@ BEST = 'best'
 _PREFIX = 'ckpt_'
 
 
+class CorruptCheckpoint(ValueError):
+  """A checkpoint file that cannot be read completely; names the file."""
+
+
 def _directory(logdir: str) -> str:
   return os.path.join(logdir, 'checkpoints')
 
 
 def list_checkpoints(logdir: str) -> list[str]:
-  """Complete checkpoint directories of a run, oldest first."""
+  """Checkpoint directories of a run (complete when written), oldest first."""
   paths = glob.glob(os.path.join(_directory(logdir), _PREFIX + '*'))
   return sorted(p for p in paths if os.path.basename(p)[len(_PREFIX):]
                 .isdigit() and os.path.exists(os.path.join(p, STATE_FILE)))
@@ -43,7 +54,8 @@ def _write(final: str, learners: Mapping[str, Any], state: dict[str, Any]):
   """Writes a checkpoint directory `final` atomically (temporary sibling,
   then rename), replacing any earlier one of that name."""
   tmp = f'{final}.tmp-{os.getpid()}'
-  shutil.rmtree(tmp, ignore_errors=True)
+  run_dir.remove_stale(os.path.dirname(final))
+  shutil.rmtree(tmp, ignore_errors=True)  # Ours, from a failed write.
   os.makedirs(tmp)
   for name, learner in learners.items():
     learner.save(os.path.join(tmp, f'{name}.msgpack'))
@@ -51,9 +63,7 @@ def _write(final: str, learners: Mapping[str, Any], state: dict[str, Any]):
     json.dump({'format': FORMAT, **state}, f, indent=1)
     f.flush()
     os.fsync(f.fileno())
-  if os.path.exists(final):  # The same iteration again after a resume.
-    shutil.rmtree(final)
-  os.replace(tmp, final)
+  run_dir.replace_directory(tmp, final)
 
 
 def save(logdir: str, learners: Mapping[str, Any], state: dict[str, Any],
@@ -71,8 +81,6 @@ def save(logdir: str, learners: Mapping[str, Any], state: dict[str, Any],
   _write(final, learners, state)
   for old in list_checkpoints(logdir)[:-keep]:
     shutil.rmtree(old, ignore_errors=True)
-  for stale in glob.glob(os.path.join(_directory(logdir), '*.tmp-*')):
-    shutil.rmtree(stale, ignore_errors=True)  # Left by a crashed writer.
   return final
 
 
@@ -85,26 +93,89 @@ def save_best(logdir: str, learners: Mapping[str, Any],
   return final
 
 
-def resolve(path: str) -> str:
-  """A checkpoint directory from a run directory (newest checkpoint) or a
-  checkpoint directory itself."""
+def _report(message: str) -> None:
+  print(message, file=sys.stderr, flush=True)
+
+
+def resolve(path: str, report: Callable[[str], None] = _report) -> str:
+  """The checkpoint directory to read: `path` itself if it is one, else the
+  newest checkpoint of the run directory `path` that reads completely.
+
+  Checkpoints that do not read completely are passed over, and `report`
+  is told which (with the file and the error) and which one is used
+  instead. A checkpoint directory given as `path` must read completely.
+
+  Raises:
+    FileNotFoundError: `path` holds no checkpoint.
+    CorruptCheckpoint: `path` is a damaged checkpoint, or every checkpoint
+      of the run is.
+  """
+  # A writer killed while replacing `best/` leaves it aside: put it back.
+  run_dir.recover_directory(os.path.normpath(path))
+  run_dir.recover_directory(os.path.join(_directory(path), BEST))
   if os.path.exists(os.path.join(path, STATE_FILE)):
+    check_complete(path)
     return path
   found = list_checkpoints(path)
   if not found:
     raise FileNotFoundError(f'No checkpoint in {path!r}: expected a run '
                             f'directory with checkpoints/{_PREFIX}*/ or a '
                             f'checkpoint directory holding {STATE_FILE}.')
-  return found[-1]
+  damaged = []
+  for checkpoint in reversed(found):
+    try:
+      check_complete(checkpoint)
+    except CorruptCheckpoint as e:
+      damaged.append(str(e))
+      continue
+    if damaged:
+      report('Skipped damaged checkpoint(s): ' + ' '.join(damaged)
+             + f' Using the newest complete one, {checkpoint}.')
+    return checkpoint
+  raise CorruptCheckpoint(f'No checkpoint of {path} reads completely: '
+                          + ' '.join(damaged))
 
 
 def read_state(checkpoint: str) -> dict[str, Any]:
-  """The state.json of a checkpoint directory."""
-  with open(os.path.join(checkpoint, STATE_FILE)) as f:
-    state = json.load(f)
+  """The state.json of a checkpoint directory.
+
+  Raises:
+    CorruptCheckpoint: the file is missing, empty or not JSON.
+    ValueError: another checkpoint format.
+  """
+  path = os.path.join(checkpoint, STATE_FILE)
+  try:
+    with open(path) as f:
+      state = json.load(f)
+  except (OSError, ValueError) as e:  # JSONDecodeError is a ValueError.
+    raise CorruptCheckpoint(f'{path} cannot be read ({e}).') from None
+  if not isinstance(state, dict):
+    raise CorruptCheckpoint(f'{path} holds no checkpoint state.')
   if state.get('format') != FORMAT:
     raise ValueError(f'{checkpoint} has checkpoint format '
                      f'{state.get("format")}, expected {FORMAT}.')
+  return state
+
+
+def check_complete(checkpoint: str) -> dict[str, Any]:
+  """Reads `checkpoint` through (state.json and every species' learner
+  file) without building learners; returns the state.
+
+  Raises:
+    CorruptCheckpoint: naming the first file that does not read completely.
+  """
+  from flax import serialization  # pylint: disable=g-import-not-at-top
+  state = read_state(checkpoint)
+  for species in state.get('species', []):
+    path = os.path.join(checkpoint, f'{species["name"]}.msgpack')
+    try:
+      with open(path, 'rb') as f:
+        contents = serialization.msgpack_restore(f.read())
+    except Exception as e:  # pylint: disable=broad-except
+      # msgpack raises ValueError ("incomplete input") or its own errors.
+      raise CorruptCheckpoint(f'{path} cannot be read ({e}).') from None
+    if not isinstance(contents, dict) or 'state' not in contents:
+      raise CorruptCheckpoint(f'{path} holds no learner state.')
   return state
 
 

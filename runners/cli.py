@@ -8,6 +8,8 @@ import argparse
 import ast
 import dataclasses
 import inspect
+import os
+import sys
 import textwrap
 import typing
 
@@ -57,4 +59,24 @@ def parse(cls, argv=None, description=None):
   values = vars(parser.parse_args(argv))
   values = {k: tuple(v) if isinstance(v, list) else v
             for k, v in values.items()}
-  return cls(**values)
+  try:
+    return cls(**values)
+  except (ValueError, TypeError) as e:
+    parser.error(str(e))  # Usage and one line naming the flag; exit 2.
+
+
+def user_errors():
+  """Exceptions that are the user's to fix (a flag, a path, a busy or
+  damaged run directory): a CLI prints them as one line."""
+  from runners import checkpoints  # pylint: disable=g-import-not-at-top
+  from runners import run_dir  # pylint: disable=g-import-not-at-top
+  return (ValueError, FileExistsError, FileNotFoundError,
+          run_dir.RunInUseError, checkpoints.CorruptCheckpoint)
+
+
+def fail(prog: str, error: Exception):
+  """Exits with status 2 and one line, or re-raises with the traceback
+  when COOP_TRACEBACK is set (e.g. to report a bug)."""
+  if os.environ.get('COOP_TRACEBACK'):
+    raise error
+  sys.exit(f'{prog}: error: {error}')

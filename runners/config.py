@@ -12,6 +12,8 @@ together); the policy acts once per `command_period` seconds ('flat': every
 control step).
 """
 import dataclasses
+import math
+import os
 import re
 from typing import Any
 
@@ -27,7 +29,8 @@ HIERARCHY_FIELDS = (
     'critic_sizes', 'flat_sizes')
 # Fields that may change when a run is resumed (the rest must match).
 RESUMABLE_CHANGES = ('actors', 'envs_per_actor', 'total_steps', 'logdir',
-                     'ray_address', 'resume', 'checkpoint_every',
+                     'ray_address', 'resume', 'resume_from',
+                     'checkpoint_every',
                      'keep_checkpoints', 'keep_best', 'max_actor_restarts',
                      'progress', 'controller', 'window')
 
@@ -58,7 +61,11 @@ class TrainArgs:
   """Join this Ray cluster (e.g. 'auto' or 'ray://host:10001'); empty
   starts a local Ray instance owned by this command."""
   resume: bool = False
-  """Continue from the newest checkpoint in logdir."""
+  """Continue from the newest checkpoint in logdir that reads completely."""
+  resume_from: str = ''
+  """Continue from this checkpoint directory of the run (e.g.
+  <logdir>/checkpoints/ckpt_00000004); implies --resume, and --logdir
+  defaults to its run."""
   paradigm: str = 'position'
   """Command paradigm of the lower layer: position or velocity."""
   controller: str = ''
@@ -120,6 +127,11 @@ class TrainArgs:
     if self.paradigm not in PARADIGMS:
       raise ValueError(f'--paradigm must be one of {PARADIGMS}, got '
                        f'{self.paradigm!r}.')
+    if self.resume_from:
+      object.__setattr__(self, 'resume', True)
+    if not self.logdir and self.resume_from:
+      object.__setattr__(self, 'logdir', os.path.dirname(os.path.dirname(
+          os.path.abspath(self.resume_from))))
     if not self.logdir:
       object.__setattr__(self, 'logdir', f'runs/{self.task}_{self.agent}_'
                          f'n{self.n_agents}_s{self.seed}')
@@ -130,8 +142,15 @@ class TrainArgs:
                          f'{getattr(self, name)}.')
     if self.actors < 0:
       raise ValueError(f'--actors must be >= 0, got {self.actors}.')
-    if self.command_period <= 0:
-      raise ValueError('--command-period must be > 0 seconds.')
+    if not 0 <= self.seed < 2**32:
+      raise ValueError(f'--seed must be in [0, 2**32), got {self.seed}.')
+    if not (math.isfinite(self.command_period) and self.command_period > 0):
+      raise ValueError('--command-period must be a finite number of seconds '
+                       f'> 0, got {self.command_period}.')
+    check_time_limit(self.time_limit)
+    if self.max_actor_restarts < -1:
+      raise ValueError('--max-actor-restarts must be >= 0, or -1 for '
+                       f'without limit, got {self.max_actor_restarts}.')
     for name in ('upper_layer_sizes', 'head_sizes', 'critic_sizes',
                  'flat_sizes'):
       object.__setattr__(self, name, tuple(getattr(self, name)))
@@ -160,6 +179,14 @@ class TrainArgs:
     """The inverse of `to_dict`; unknown keys (older runs) are dropped."""
     names = {f.name for f in dataclasses.fields(cls)}
     return cls(**{k: v for k, v in values.items() if k in names})
+
+
+def check_time_limit(seconds: float, flag: str = '--time-limit') -> None:
+  """Raises ValueError unless `seconds` is 0 (the task's default episode
+  length) or a finite number of seconds > 0."""
+  if not (seconds == 0 or (math.isfinite(seconds) and seconds > 0)):
+    raise ValueError(f'{flag} must be 0 (the task\'s default) or a finite '
+                     f'number of seconds > 0, got {seconds}.')
 
 
 def hierarchy_config(args: TrainArgs) -> hierarchy_config_lib.HierarchyConfig:

@@ -61,10 +61,20 @@ class EvalArgs:
   height: int = 480
 
   def __post_init__(self):
+    from runners import config as config_lib  # pylint: disable=g-import-not-at-top
     if not self.checkpoint:
       raise ValueError('Give at least one --checkpoint DIR.')
-    if self.episodes < 1 or self.envs < 1 or not self.seeds:
-      raise ValueError('--episodes and --envs must be >= 1, --seeds given.')
+    for name in ('episodes', 'envs', 'width', 'height'):
+      if getattr(self, name) < 1:
+        raise ValueError(f'--{name} must be >= 1, got {getattr(self, name)}.')
+    for name in ('n_agents', 'n_pushers'):
+      if getattr(self, name) < 0:
+        raise ValueError(f'--{name.replace("_", "-")} must be >= 1, or 0 for '
+                         f'the training count, got {getattr(self, name)}.')
+    if not self.seeds or not all(0 <= s < 2**32 for s in self.seeds):
+      raise ValueError(f'--seeds must be one or more integers in [0, 2**32), '
+                       f'got {list(self.seeds)}.')
+    config_lib.check_time_limit(self.time_limit)
 
 
 def load_model(path: str, args: EvalArgs):
@@ -259,7 +269,10 @@ def evaluate(args: EvalArgs) -> dict:
 
 def main(argv=None):
   args = cli.parse(EvalArgs, argv, description=__doc__.splitlines()[0])
-  out = evaluate(args)
+  try:
+    out = evaluate(args)
+  except cli.user_errors() as e:
+    cli.fail('coop-eval', e)
   print(f'{out["description"]}: {len(args.checkpoint)} model(s) x '
         f'{len(args.seeds)} seed(s) x {args.episodes} episodes')
   for model in out['models']:

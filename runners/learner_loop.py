@@ -43,8 +43,14 @@ from runners import run_dir
 def check_run_directory(args: config_lib.TrainArgs) -> Optional[str]:
   """The checkpoint to resume from (None for a new run); raises when the
   directory holds another run or the settings differ from the saved ones."""
-  if args.resume:
+  if args.resume_from:
+    checkpoint = checkpoints.resolve(args.resume_from)
+    if checkpoints.run_directory(checkpoint) != os.path.abspath(args.logdir):
+      raise ValueError(f'--resume-from {args.resume_from} is not a checkpoint '
+                       f'of --logdir {args.logdir}.')
+  elif args.resume:
     checkpoint = checkpoints.resolve(args.logdir)
+  if args.resume:
     saved = checkpoints.read_state(checkpoint)
     config_lib.check_resumable(saved['args'], args)
     return checkpoint
@@ -55,23 +61,26 @@ def check_run_directory(args: config_lib.TrainArgs) -> Optional[str]:
   return None
 
 
+def _controller_copy(args: config_lib.TrainArgs) -> str:
+  """Where the run keeps its lower layer: a resumed run and its evaluation
+  use the controller the policy was trained with, whatever --controller
+  says then."""
+  return os.path.join(args.logdir, 'controller')
+
+
+def _has_controller_copy(args: config_lib.TrainArgs) -> bool:
+  return args.resume and os.path.exists(
+      os.path.join(_controller_copy(args), 'config.json'))
+
+
 def environment_spec(args: config_lib.TrainArgs) -> envs_lib.EnvSpec:
-  """The run's environments, with its lower layer (copied into the run)."""
+  """The run's environments, with its lower layer (the run's copy when
+  resuming); writes nothing."""
   files = None
   if args.agent != 'flat':
-    # The run keeps a copy of its lower layer: a resumed run and its
-    # evaluation use the controller the policy was trained with, whatever
-    # --controller says then.
-    copy = os.path.join(args.logdir, 'controller')
-    use_copy = args.resume and os.path.exists(os.path.join(copy,
-                                                           'config.json'))
-    files = envs_lib.read_controller(args.paradigm,
-                                     copy if use_copy else args.controller)
-    os.makedirs(copy, exist_ok=True)
-    for name, data in files.items():
-      with open(os.path.join(copy, name), 'wb') as f:
-        f.write(data)
-  os.makedirs(args.logdir, exist_ok=True)
+    files = envs_lib.read_controller(
+        args.paradigm, _controller_copy(args) if _has_controller_copy(args)
+        else args.controller)
   return envs_lib.EnvSpec(args.task, args.n_agents, args.env_options(),
                           args.agent, args.command_period, files)
 
@@ -100,17 +109,22 @@ def train(args: config_lib.TrainArgs,
 
   `on_iteration(iteration, row, pool)` is called after every iteration.
   """
-  checkpoint = check_run_directory(args)
-  # Ray first: its processes are then not started from a process where JAX
-  # already runs threads.
-  owns_ray = args.actors > 0 and actor_pool.init_ray(
-      args.ray_address, num_cpus=max(os.cpu_count(), args.actors))
-  try:
-    return _train(args, checkpoint, on_iteration)
-  finally:
-    if owns_ray:
-      import ray  # pylint: disable=g-import-not-at-top
-      ray.shutdown()
+  # One writer per run directory, from the check that it is free to the end.
+  with run_dir.RunLock(args.logdir):
+    checkpoint = check_run_directory(args)
+    print(f'Writing to {os.path.abspath(args.logdir)}'
+          + (f', resuming from {checkpoint}' if checkpoint else ''),
+          flush=True)
+    # Ray first: its processes are then not started from a process where
+    # JAX already runs threads.
+    owns_ray = args.actors > 0 and actor_pool.init_ray(
+        args.ray_address, num_cpus=max(os.cpu_count(), args.actors))
+    try:
+      return _train(args, checkpoint, on_iteration)
+    finally:
+      if owns_ray:
+        import ray  # pylint: disable=g-import-not-at-top
+        ray.shutdown()
 
 
 def _train(args, checkpoint, on_iteration):
@@ -124,6 +138,9 @@ def _train(args, checkpoint, on_iteration):
           f'Species {s.name!r} has {rows} agents per iteration (actors x '
           f'envs-per-actor x {len(s.agents)}), not divisible by '
           f'--num-minibatches {config.num_minibatches}.')
+  if spec.controller_files and not _has_controller_copy(args):
+    # Once the settings are known to work; whole or not at all.
+    run_dir.write_directory(_controller_copy(args), spec.controller_files)
   learners = {}
   for s in layout:
     builder = hierarchy_builder.HierarchyBuilder(config, s.species_id)
@@ -223,7 +240,7 @@ def _train(args, checkpoint, on_iteration):
     log.close()
     if pool is not None:
       pool.close()
-  return {**row, 'iterations': iterations,
+  return {**row, 'iterations': iterations, 'stopped_by': stop.signal,
           'checkpoint': (checkpoints.list_checkpoints(args.logdir) or [''])[-1]}
 
 

@@ -1,21 +1,189 @@
-"""A training run's directory: metrics.csv + TensorBoard, checkpoints.
+"""A training run's directory: one writer, crash-safe files, metrics.
 
 Shared by the runners so that every run directory looks the same:
 
+  writer.lock                          held by the run's one writer (`RunLock`)
   metrics.csv, events.out.tfevents.*   one row per update (`MetricsLog`)
   checkpoints/ckpt_<update>.msgpack    the learner's state (`learner.save`)
   checkpoints/ckpt_<update>.json       the runner's counters, written last
+
+Every write survives a kill at any instant: files and directories are
+written under a temporary name ending in `.tmp-<pid>` and renamed into
+place; a directory that replaces another (`replace_directory`) moves the old
+one aside to `.old-<pid>` first, and `recover_directory` puts it back if the
+writer died between the two renames. Leftovers are removed only once their
+writer's process is gone (`remove_stale`).
 
 `GracefulStop` turns the first Ctrl-C / SIGTERM into a request the training
 loop polls, so a run can stop with a checkpoint instead of losing an update.
 """
 import csv
+import errno
+import fcntl
 import glob
 import json
 import math
 import os
+import re
+import shutil
 import signal
+import socket
 import threading
+
+LOCK_FILE = 'writer.lock'
+_LEFTOVER = re.compile(r'\.(tmp|old)-(\d+)$')
+
+
+# --- One writer per run directory --------------------------------------------
+
+
+class RunInUseError(RuntimeError):
+  """Another live process is writing to the run directory."""
+
+
+class RunLock:
+  """Context manager: exclusive writer of `logdir` for the whole run.
+
+  An advisory `flock` on `<logdir>/writer.lock`, which holds the writer's
+  pid and host. The kernel drops it when the process dies, however it dies,
+  so a crashed run never blocks the next one. Creates `logdir`; if that
+  directory was new and nothing but the lock was written into it (the run
+  failed while setting up), it is removed again on exit.
+  """
+
+  def __init__(self, logdir: str):
+    self._logdir = logdir
+    self._path = os.path.join(logdir, LOCK_FILE)
+    self._file = None
+    self._created = False
+
+  def __enter__(self):
+    self._created = not os.path.isdir(self._logdir)
+    while True:
+      os.makedirs(self._logdir, exist_ok=True)
+      handle = open(self._path, 'a+')  # pylint: disable=consider-using-with
+      try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+      except OSError as e:
+        handle.seek(0)
+        holder = handle.read().strip() or 'unknown'
+        handle.close()
+        if e.errno not in (errno.EAGAIN, errno.EACCES):
+          raise
+        raise RunInUseError(
+            f'{self._logdir} is being written by another run (pid, host: '
+            f'{holder}); wait for it to finish, stop it, or choose another '
+            '--logdir.') from None
+      # The file may have been removed (by `__exit__` of a run that set up
+      # nothing) between our open and our lock: then lock the new one.
+      try:
+        if os.stat(self._path).st_ino == os.fstat(handle.fileno()).st_ino:
+          break
+      except FileNotFoundError:
+        pass
+      handle.close()
+    handle.seek(0)
+    handle.truncate()
+    handle.write(f'{os.getpid()} {socket.gethostname()}\n')
+    handle.flush()
+    self._file = handle
+    return self
+
+  def __exit__(self, *exc):
+    if self._created and os.listdir(self._logdir) == [LOCK_FILE]:
+      os.remove(self._path)  # Still locked: no one can hold a stale inode.
+      os.rmdir(self._logdir)
+    self._file.close()  # Releases the lock.
+    self._file = None
+
+
+# --- Crash-safe writes --------------------------------------------------------
+
+
+def _alive(pid: int) -> bool:
+  try:
+    os.kill(pid, 0)
+  except ProcessLookupError:
+    return False
+  except PermissionError:
+    return True
+  return True
+
+
+def _leftovers(final: str):
+  """[(path, kind 'tmp'/'old', pid)] left next to `final` by writers."""
+  out = []
+  for path in glob.glob(glob.escape(final) + '.*-*'):
+    match = _LEFTOVER.search(path)
+    if match and path[:match.start()] == final:
+      out.append((path, match.group(1), int(match.group(2))))
+  return out
+
+
+def _remove(path: str) -> None:
+  if os.path.isdir(path) and not os.path.islink(path):
+    shutil.rmtree(path, ignore_errors=True)
+  elif os.path.lexists(path):
+    os.remove(path)
+
+
+def recover_directory(final: str) -> None:
+  """Puts back the directory `final` if a writer died while replacing it.
+
+  `replace_directory` moves the old `final` to `final.old-<pid>` before it
+  renames the new one in; a writer killed in between leaves no `final`.
+  Only leftovers of dead writers are touched.
+  """
+  for path, kind, pid in _leftovers(final):
+    if kind == 'old' and pid != os.getpid() and not _alive(pid):
+      if os.path.exists(final):
+        _remove(path)
+      else:
+        os.replace(path, final)
+
+
+def replace_directory(tmp: str, final: str) -> None:
+  """Renames the complete directory `tmp` to `final`, replacing any earlier
+  `final` so that a kill at any instant leaves one of the two in place (or
+  recoverable with `recover_directory`)."""
+  recover_directory(final)
+  old = f'{final}.old-{os.getpid()}'
+  if os.path.exists(final):
+    _remove(old)
+    os.replace(final, old)
+  os.replace(tmp, final)
+  _remove(old)
+
+
+def write_directory(final: str, files) -> None:
+  """Writes {name: bytes} as the directory `final`, atomically (all files
+  or none), replacing an earlier one."""
+  tmp = f'{final}.tmp-{os.getpid()}'
+  _remove(tmp)
+  os.makedirs(tmp)
+  for name, data in files.items():
+    with open(os.path.join(tmp, name), 'wb') as f:
+      f.write(data)
+      f.flush()
+      os.fsync(f.fileno())
+  replace_directory(tmp, final)
+
+
+def remove_stale(directory: str) -> None:
+  """Removes `.tmp-<pid>` / `.old-<pid>` leftovers in `directory` whose
+  writer is dead (never a live writer's work in progress); an `.old-` whose
+  directory is missing is put back instead."""
+  for path in glob.glob(os.path.join(glob.escape(directory), '*.*-*')):
+    match = _LEFTOVER.search(path)
+    if not match:
+      continue
+    pid = int(match.group(2))
+    if pid == os.getpid() or _alive(pid):
+      continue
+    if match.group(1) == 'old':
+      recover_directory(path[:match.start()])
+    else:
+      _remove(path)
 
 
 # --- Checkpoints -------------------------------------------------------------
@@ -93,10 +261,16 @@ class MetricsLog:
       with open(self._path, newline='') as f:
         rows = [r for r in csv.DictReader(f)
                 if int(r['update']) <= resume_update]
-    with open(self._path, 'w', newline='') as f:
+    # The kept rows go to a new file that replaces the old one: a kill
+    # while writing leaves the old file whole.
+    tmp = f'{self._path}.tmp-{os.getpid()}'
+    with open(tmp, 'w', newline='') as f:
       writer = csv.DictWriter(f, self.columns, extrasaction='ignore')
       writer.writeheader()
       writer.writerows(rows)
+      f.flush()
+      os.fsync(f.fileno())
+    os.replace(tmp, self._path)
     self._file = open(self._path, 'a', newline='')
     self._csv = csv.DictWriter(self._file, self.columns, extrasaction='ignore')
     self._tb = None
@@ -131,6 +305,8 @@ class GracefulStop:
 
   def __init__(self):
     self.requested = False
+    self.signal = None
+    """The name of the signal that requested the stop ('SIGTERM'...)."""
     self._previous = {}
 
   def __enter__(self):
@@ -144,7 +320,9 @@ class GracefulStop:
       signal.signal(signum, self._previous.get(signum, signal.SIG_DFL))
       raise KeyboardInterrupt
     self.requested = True
-    print('Stopping after this update (again to interrupt now).', flush=True)
+    self.signal = signal.Signals(signum).name
+    print(f'{self.signal}: stopping after this update (again to interrupt '
+          'now).', flush=True)
 
   def __exit__(self, *exc):
     for sig, handler in self._previous.items():

@@ -15,20 +15,33 @@ Evaluate with `coop-eval --checkpoint <logdir>`.
 """
 import json
 import os
+import signal
+import sys
 
 from runners import cli
 from runners import config as config_lib
 
 
 def main(argv=None):
+  """Exit status 0 when the run finished, 128 + the signal's number when
+  SIGINT / SIGTERM stopped it early (with a checkpoint), 2 for a user
+  error (one line)."""
   args = cli.parse(config_lib.TrainArgs, argv,
                    description=__doc__.splitlines()[0])
   from runners import learner_loop  # pylint: disable=g-import-not-at-top
-  summary = learner_loop.train(args)
+  try:
+    summary = learner_loop.train(args)
+  except cli.user_errors() as e:
+    cli.fail('coop-train', e)
   keys = ('update', 'env_steps', 'return', 'success', 'wall_time')
   print(json.dumps({k: summary.get(k) for k in keys}))
   print(f'checkpoint: {summary["checkpoint"]}')
   print(f'evaluate:   coop-eval --checkpoint {os.path.abspath(args.logdir)}')
+  if summary.get('stopped_by'):
+    print(f'Stopped by {summary["stopped_by"]} after iteration '
+          f'{summary.get("update")} of {summary["iterations"]}; continue '
+          f'with: coop-train --logdir {args.logdir} --resume', flush=True)
+    sys.exit(128 + signal.Signals[summary['stopped_by']].value)
 
 
 if __name__ == '__main__':

@@ -1,0 +1,327 @@
+"""A run directory under every mistake: a second writer, kills in the middle
+of a write, damaged checkpoints, bad flags, SIGTERM."""
+import csv
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+from runners import checkpoints
+from runners import cli
+from runners import config as config_lib
+from runners import evaluate
+from runners import learner_loop
+from runners import run_dir
+from runners import train
+from tests.test_train import STEPS
+from tests.test_train import TINY
+from tests.test_train import _args
+from tests.test_train import _rows
+from tests.test_train import controller  # pylint: disable=unused-import
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+pytestmark = pytest.mark.filterwarnings('ignore:os.fork:RuntimeWarning')
+
+
+FAKE_LEARNER = """
+import msgpack
+class FakeLearner:
+  # Writes a learner file flax reads (msgpack), without networks.
+  def __init__(self, value):
+    self.value = value
+  def save(self, path):
+    with open(path, 'wb') as f:
+      f.write(msgpack.packb({'format': 1, 'state': {'w': [self.value] * 3}}))
+"""
+exec(FAKE_LEARNER)  # pylint: disable=exec-used
+
+
+def _state(iteration):
+  return {'iteration': iteration, 'species': [{'name': 'ant'}]}
+
+
+def _save(logdir, iteration, keep=5):
+  return checkpoints.save(logdir, {'ant': FakeLearner(iteration)},
+                          _state(iteration), keep)
+
+
+def _holder(script):
+  """A python process running `script` that prints 'ready' then sleeps."""
+  process = subprocess.Popen(
+      [sys.executable, '-c', textwrap.dedent(script) +
+       '\nprint("ready", flush=True)\nimport time\ntime.sleep(120)\n'],
+      cwd=REPO, stdout=subprocess.PIPE, text=True)
+  assert process.stdout.readline().strip() == 'ready'
+  return process
+
+
+def _dead_pid():
+  process = subprocess.Popen([sys.executable, '-c', 'pass'])
+  process.wait()
+  return process.pid
+
+
+# --- 1. One writer -------------------------------------------------------------
+
+
+def test_second_writer_is_refused_until_the_first_dies(tmp_path):
+  logdir = str(tmp_path / 'run')
+  holder = _holder(f'''
+      from runners import run_dir
+      lock = run_dir.RunLock({logdir!r}).__enter__()''')
+  try:
+    with pytest.raises(run_dir.RunInUseError,
+                       match=f'another run .*{holder.pid}'):
+      with run_dir.RunLock(logdir):
+        pass
+  finally:
+    holder.kill()
+    holder.wait()
+  with run_dir.RunLock(logdir):  # The kernel dropped the dead writer's lock.
+    assert open(os.path.join(logdir, run_dir.LOCK_FILE)).read().split()[0] \
+        == str(os.getpid())
+
+
+def test_training_takes_the_lock_before_checking_the_directory(controller,
+                                                               tmp_path):
+  logdir = str(tmp_path / 'run')
+  with run_dir.RunLock(logdir):
+    for resume in (False, True):
+      with pytest.raises(run_dir.RunInUseError, match='--logdir'):
+        learner_loop.train(_args(logdir, controller, resume=resume))
+    assert os.listdir(logdir) == [run_dir.LOCK_FILE]  # Nothing written.
+  assert not os.path.exists(logdir)  # The lock's own directory, removed.
+
+
+def test_only_dead_writers_temporaries_are_removed(tmp_path):
+  logdir = str(tmp_path)
+  directory = os.path.join(logdir, 'checkpoints')
+  holder = _holder('pass')
+  try:
+    live = os.path.join(directory, f'ckpt_00000002.tmp-{holder.pid}')
+    dead = os.path.join(directory, f'ckpt_00000003.tmp-{_dead_pid()}')
+    for path in (live, dead):
+      os.makedirs(path)
+    _save(logdir, 1)
+    assert os.path.isdir(live)  # Another writer's work in progress.
+    assert not os.path.exists(dead)
+  finally:
+    holder.kill()
+    holder.wait()
+
+
+# --- 2. Damaged checkpoints ----------------------------------------------------
+
+
+def test_damaged_newest_checkpoint_is_named_and_passed_over(tmp_path):
+  logdir = str(tmp_path)
+  paths = [_save(logdir, i) for i in (1, 2, 3)]
+  learner_file = os.path.join(paths[2], 'ant.msgpack')
+  with open(learner_file, 'r+b') as f:
+    f.truncate(os.path.getsize(learner_file) // 2)
+  reports = []
+  assert checkpoints.resolve(logdir, reports.append) == paths[1]
+  assert learner_file in reports[0] and paths[1] in reports[0]
+  # Named when asked for by name.
+  with pytest.raises(checkpoints.CorruptCheckpoint, match=learner_file):
+    checkpoints.resolve(paths[2])
+  # An empty state.json too.
+  open(os.path.join(paths[1], checkpoints.STATE_FILE), 'w').close()
+  reports.clear()
+  assert checkpoints.resolve(logdir, reports.append) == paths[0]
+  assert os.path.join(paths[1], checkpoints.STATE_FILE) in reports[0]
+  shutil.rmtree(paths[0])
+  with pytest.raises(checkpoints.CorruptCheckpoint, match='reads completely'):
+    checkpoints.resolve(logdir)
+
+
+@pytest.fixture(scope='module')
+def run3(tmp_path_factory, controller):  # pylint: disable=redefined-outer-name
+  """Three iterations in one process."""
+  logdir = str(tmp_path_factory.mktemp('runs') / 'three')
+  learner_loop.train(_args(logdir, controller, total_steps=3 * STEPS))
+  return logdir
+
+
+def _argv(controller, total_steps):  # pylint: disable=redefined-outer-name
+  """The flags of `_args` (tests/test_train.py) for the CLI."""
+  argv = ['--controller', controller, '--total-steps', str(total_steps)]
+  for name, value in TINY.items():
+    flag = '--' + name.replace('_', '-')
+    if isinstance(value, bool):
+      argv.append(flag if value else '--no-' + flag[2:])
+    elif isinstance(value, tuple):
+      argv += [flag, *map(str, value)]
+    else:
+      argv += [flag, str(value)]
+  return argv
+
+
+def test_resume_and_eval_fall_back_from_a_damaged_checkpoint(
+    run3, controller, tmp_path, capsys, monkeypatch):
+  real_train = learner_loop.train
+  logdir = str(tmp_path / 'damaged')
+  shutil.copytree(run3, logdir)
+  newest = checkpoints.list_checkpoints(logdir)[-1]
+  assert newest.endswith('ckpt_00000003')
+  learner_file = os.path.join(newest, 'ant.msgpack')
+  with open(learner_file, 'r+b') as f:
+    f.truncate(100)
+  controller_file = os.path.join(logdir, 'controller', 'config.json')
+  before = os.stat(controller_file)
+
+  evaluate.main(['--checkpoint', logdir, '--episodes', '1', '--envs', '1'])
+  captured = capsys.readouterr()
+  assert learner_file in captured.err and 'ckpt_00000002' in captured.err
+  assert 'success rate' in captured.out
+
+  summary = learner_loop.train(_args(logdir, controller, resume=True,
+                                     total_steps=3 * STEPS))
+  out = capsys.readouterr()
+  assert learner_file in out.err
+  assert 'resuming from' in out.out and 'ckpt_00000002' in out.out
+  assert summary['update'] == 3
+  assert [int(r['update']) for r in _rows(logdir)] == [1, 2, 3]
+  checkpoints.check_complete(newest)  # Iteration 3 was written again.
+  # The controller copy is read, never rewritten, on resume.
+  after = os.stat(controller_file)
+  assert (after.st_ino, after.st_mtime_ns) == (before.st_ino,
+                                               before.st_mtime_ns)
+
+  # --resume-from picks one (implies --resume; later rows go), and SIGTERM
+  # stops with a checkpoint and the status of a signal, not success's 0.
+  chosen = os.path.join(logdir, 'checkpoints', 'ckpt_00000002')
+  with pytest.raises(ValueError, match='not a checkpoint of --logdir'):
+    learner_loop.train(_args(str(tmp_path / 'other'), controller,
+                             resume_from=chosen))
+  monkeypatch.setattr(learner_loop, 'train', lambda args: real_train(
+      args, on_iteration=lambda *_: os.kill(os.getpid(), signal.SIGTERM)))
+  with pytest.raises(SystemExit) as exit_info:
+    train.main(['--resume-from', chosen, *_argv(controller, 5 * STEPS)])
+  assert exit_info.value.code == 128 + signal.SIGTERM
+  out = capsys.readouterr().out
+  assert 'resuming from ' + chosen in out
+  assert 'Stopped by SIGTERM after iteration 3 of 5' in out
+  assert [int(r['update']) for r in _rows(logdir)] == [1, 2, 3]
+  last = checkpoints.resolve(logdir)  # Written by the stopped run.
+  assert checkpoints.read_state(last)['args']['resume_from'] == chosen
+
+
+# --- 3. Crash-safe writes ------------------------------------------------------
+
+
+def test_best_survives_a_kill_between_its_two_renames(tmp_path):
+  logdir = str(tmp_path)
+  best = checkpoints.save_best(logdir, {'ant': FakeLearner(1.0)}, _state(1))
+  script = FAKE_LEARNER + textwrap.dedent(f'''
+      import os
+      from runners import checkpoints
+      replace = os.replace
+      def replace_or_die(source, target):
+        if '.tmp-' in source and target.endswith('best'):
+          os._exit(9)  # Killed after the old best was moved aside.
+        replace(source, target)
+      os.replace = replace_or_die
+      checkpoints.save_best({logdir!r}, {{'ant': FakeLearner(2.0)}},
+                            {_state(2)!r})
+      ''')
+  result = subprocess.run([sys.executable, '-c', script],
+                          cwd=REPO, check=False)
+  assert result.returncode == 9
+  assert checkpoints.read_state(checkpoints.resolve(best))['iteration'] == 1
+  checkpoints.save_best(logdir, {'ant': FakeLearner(3.0)}, _state(3))
+  assert checkpoints.read_state(best)['iteration'] == 3
+  assert os.listdir(os.path.dirname(best)) == ['best']  # No leftovers.
+
+
+def test_metrics_csv_survives_a_kill_while_resuming(tmp_path, monkeypatch):
+  logdir = str(tmp_path)
+  log = run_dir.MetricsLog(logdir, ['update', 'env_steps'])
+  for update in (1, 2, 3):
+    log.write({'update': update, 'env_steps': 10 * update})
+  log.close()
+
+  class Killed(BaseException):
+    pass
+
+  class DyingWriter(csv.DictWriter):
+    def writerows(self, rows):
+      raise Killed
+
+  monkeypatch.setattr(run_dir.csv, 'DictWriter', DyingWriter)
+  with pytest.raises(Killed):
+    run_dir.MetricsLog(logdir, ['update', 'env_steps'], resume_update=2)
+  monkeypatch.undo()
+  assert [int(r['update']) for r in _rows(logdir)] == [1, 2, 3]
+  run_dir.MetricsLog(logdir, ['update', 'env_steps'], resume_update=2).close()
+  assert [int(r['update']) for r in _rows(logdir)] == [1, 2]
+
+
+def test_directory_is_written_whole_or_not_at_all(tmp_path, monkeypatch):
+  final = str(tmp_path / 'controller')
+  run_dir.write_directory(final, {'a': b'old', 'b': b'old'})
+
+  class Killed(BaseException):
+    pass
+
+  fsync = os.fsync
+  calls = []
+
+  def fsync_then_die(fd):
+    calls.append(fd)
+    if len(calls) == 2:
+      raise Killed
+    fsync(fd)
+
+  monkeypatch.setattr(run_dir.os, 'fsync', fsync_then_die)
+  with pytest.raises(Killed):
+    run_dir.write_directory(final, {'a': b'new', 'b': b'new'})
+  monkeypatch.undo()
+  assert sorted(os.listdir(final)) == ['a', 'b']
+  assert open(os.path.join(final, 'b'), 'rb').read() == b'old'
+
+
+# --- 8. Settings and signals ---------------------------------------------------
+
+
+def test_invalid_settings_leave_no_directory(controller, tmp_path):
+  logdir = str(tmp_path / 'bad')
+  with pytest.raises(ValueError, match='--num-minibatches'):
+    learner_loop.train(_args(logdir, controller, num_minibatches=3))
+  assert not os.path.exists(logdir)
+
+
+@pytest.mark.parametrize('argv,flag', [
+    (['--time-limit', 'nan'], '--time-limit'),
+    (['--time-limit', '-5'], '--time-limit'),
+    (['--command-period', 'nan'], '--command-period'),
+    (['--seed', '-1'], '--seed'),
+    (['--max-actor-restarts', '-5'], '--max-actor-restarts'),
+])
+def test_bad_flags_give_one_line_naming_the_flag(argv, flag, capsys):
+  with pytest.raises(SystemExit) as exit_info:
+    cli.parse(config_lib.TrainArgs, argv)
+  assert exit_info.value.code == 2
+  error = capsys.readouterr().err.strip().splitlines()[-1]
+  assert error.startswith('usage: ') is False and flag in error
+
+
+@pytest.mark.parametrize('argv,flag', [
+    (['--time-limit', '-1'], '--time-limit'),
+    (['--time-limit', 'inf'], '--time-limit'),
+    (['--seeds', '0', '-3'], '--seeds'),
+])
+def test_bad_eval_flags_name_the_flag(argv, flag, capsys):
+  with pytest.raises(SystemExit):
+    evaluate.main(['--checkpoint', 'runs/x', *argv])
+  assert flag in capsys.readouterr().err
+
+
+def test_user_errors_are_one_line(tmp_path, capsys):
+  with pytest.raises(SystemExit) as exit_info:
+    evaluate.main(['--checkpoint', str(tmp_path)])
+  assert exit_info.value.code.startswith('coop-eval: error: No checkpoint')
