@@ -13,8 +13,9 @@ order) for one synchronous PPO iteration:
 
 Ray notes (see docs/training.md): actors run with `JAX_PLATFORMS=cpu` and
 single-threaded XLA/OpenMP, set through the actor's runtime environment
-before JAX starts; they never fork. `init_ray` starts a local instance (or
-joins `--ray-address`) quietly, without the dashboard.
+before JAX starts; they never fork. `init_ray` starts a local instance
+quietly, listening on loopback only, with no dashboard and no metrics
+endpoint; `--ray-address` joins a cluster with the cluster's own settings.
 """
 import logging
 import time
@@ -82,9 +83,20 @@ def init_ray(address: str = '', num_cpus: Optional[int] = None) -> bool:
       'ray._private.authentication.authentication_token_setup')
   level = notice.level
   notice.setLevel(logging.ERROR)
+  # Loopback only: Ray takes the machine's address as the node's and its
+  # servers (GCS, raylet, workers, agents) listen on every interface; with
+  # the loopback address as the node's they listen on 127.0.0.1. Ray turns
+  # `_node_ip_address='127.0.0.1'` back into the external address; its
+  # single-machine mode (the default on Windows and macOS) keeps loopback.
+  from ray._private import ray_constants  # pylint: disable=g-import-not-at-top
+  cluster_mode = ray_constants.ENABLE_RAY_CLUSTER
+  ray_constants.ENABLE_RAY_CLUSTER = False
   try:
-    ray.init(num_cpus=num_cpus, include_dashboard=False, **quiet)
+    ray.init(num_cpus=num_cpus, include_dashboard=False,
+             # No Prometheus endpoint: nothing here reads it.
+             _system_config={'enable_metrics_collection': False}, **quiet)
   finally:
+    ray_constants.ENABLE_RAY_CLUSTER = cluster_mode
     notice.setLevel(level)
   return True
 

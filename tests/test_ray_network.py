@@ -1,0 +1,46 @@
+"""Ray as `coop-train` starts it: nothing reachable from outside the
+machine, no metrics or dashboard servers."""
+import http.client
+import os
+import time
+import urllib.error
+import urllib.request
+
+import psutil
+import pytest
+
+from runners import actor_pool
+
+
+def _listening(pids):
+  return [c for c in psutil.net_connections('inet')
+          if c.status == psutil.CONN_LISTEN and c.pid in pids]
+
+
+def test_local_ray_listens_on_loopback_only_and_serves_no_metrics():
+  import ray  # pylint: disable=g-import-not-at-top
+  assert actor_pool.init_ray(num_cpus=1), 'Ray was already running.'
+  try:
+    @ray.remote(num_cpus=1)
+    def worker_pid():
+      return os.getpid()
+
+    worker = ray.get(worker_pid.remote())  # A worker process serves too.
+    time.sleep(1.0)  # Agents finish starting their servers.
+    me = psutil.Process()
+    pids = {me.pid, *(p.pid for p in me.children(recursive=True))}
+    assert worker in pids
+    sockets = _listening(pids)
+    assert {c.pid for c in sockets} > {me.pid, worker}  # GCS, raylet...
+    exposed = [(c.laddr.ip, c.laddr.port) for c in sockets
+               if c.laddr.ip not in ('127.0.0.1', '::1', '::ffff:127.0.0.1')]
+    assert not exposed
+    for c in sockets:
+      try:
+        with urllib.request.urlopen(
+            f'http://127.0.0.1:{c.laddr.port}/metrics', timeout=2) as reply:
+          pytest.fail(f'port {c.laddr.port} answers /metrics ({reply.status})')
+      except (urllib.error.URLError, http.client.HTTPException, OSError):
+        pass  # gRPC or nothing: not an HTTP metrics endpoint.
+  finally:
+    ray.shutdown()
