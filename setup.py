@@ -41,6 +41,12 @@ setuptools.setup(
     ],
     extras_require={
         "pettingzoo": ["pettingzoo>=1.24", "gymnasium>=0.29"],
+        # coop_suite.rllib; not in "test": RLlib pins gymnasium and pulls
+        # pandas and pyarrow (tests/test_rllib.py skips without it).
+        "rllib": ["ray[rllib]>=2.9", "pettingzoo>=1.24"],
+        # The TensorBoard viewer for a run's events (tensorboardX writes
+        # them and is installed anyway).
+        "tensorboard": ["tensorboard"],
         "test": ["pytest", "pettingzoo>=1.24", "gymnasium>=0.29"],
     },
     entry_points={

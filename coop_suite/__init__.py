@@ -60,7 +60,7 @@ def _headless_renderer():
 _headless_renderer()
 
 __all__ = ["load", "TASKS", "CoopEnvironment", "is_truncation",
-           "pettingzoo_env", "agent_range"]
+           "pettingzoo_env", "rllib_env", "agent_range"]
 
 
 def agent_range(task):
@@ -145,6 +145,16 @@ def pettingzoo_env(task, n_agents=None, *, flatten=False, render_mode=None,
   return wrappers.ParallelEnv(load(task, n_agents, **load_kwargs),
                               flatten=flatten, render_mode=render_mode,
                               render_size=render_size)
+
+
+def rllib_env(task, n_agents=None, **options):
+  """An RLlib `MultiAgentEnv` around `load(task, n_agents, ...)`.
+
+  `options`: `flatten` (default True), `render_mode`, `render_size` and any
+  `load` option; see `coop_suite.rllib` (needs the `rllib` extra).
+  """
+  from coop_suite import rllib  # pylint: disable=g-import-not-at-top
+  return rllib.MultiAgentEnv({"task": task, "n_agents": n_agents, **options})
 
 
 def _check_task(task):
