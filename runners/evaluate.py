@@ -20,6 +20,7 @@ step, with `coop_suite.camera.FramingCamera`.
 import dataclasses
 import json
 import os
+import sys
 
 import numpy as np
 
@@ -180,7 +181,7 @@ class _Filming:
     self._writer = imageio.get_writer(
         path, fps=round(1 / env.control_timestep()), codec='libx264',
         quality=7, macro_block_size=8)
-    self.frames, self.done = 0, False
+    self.frames, self.done, self.success = 0, False, None
 
   def __getattr__(self, name):
     return getattr(self._env, name)
@@ -201,6 +202,7 @@ class _Filming:
     self._film()
     if timestep.last() and not self.done:
       self.done = True
+      self.success = bool(self._env.episode_metrics()['success'])
       self._writer.close()
     return timestep
 
@@ -211,8 +213,9 @@ class _Filming:
 
 
 def film(spec, config, models, seed: int, path: str, size=(640, 480),
-         deterministic: bool = True) -> int:
-  """Writes one episode to the mp4 `path`; returns the number of frames."""
+         deterministic: bool = True) -> tuple[int, bool]:
+  """Writes one episode to the mp4 `path`; returns (frames, whether the
+  episode succeeded)."""
   from runners import rollout  # pylint: disable=g-import-not-at-top
   os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
   filming = []
@@ -226,7 +229,7 @@ def film(spec, config, models, seed: int, path: str, size=(640, 480),
       batch.step(_act(actors, batch, models))
   finally:
     batch.close()
-  return filming[0].frames
+  return filming[0].frames, filming[0].success
 
 
 def mean_and_error(values):
@@ -237,16 +240,25 @@ def mean_and_error(values):
   return float(values.mean()), float(error)
 
 
-def evaluate(args: EvalArgs) -> dict:
-  """Plays every model x seed; returns the figures that `main` prints."""
+def evaluate(args: EvalArgs, log=None) -> dict:
+  """Plays every model x seed; returns the figures that `main` prints.
+
+  `log(line)` hears the progress (one line per model and seed).
+  """
+  log = log or (lambda line: None)
   per_model, episodes, description = [], [], None
-  for path in args.checkpoint:
+  filmed = None
+  for index, path in enumerate(args.checkpoint):
     spec, config, models, state = load_model(path, args)
     description = (f'{spec.task} with {spec.n_agents} agents, agent '
                    f'{config.agent}')
-    played = [e for seed in args.seeds for e in play(
-        spec, config, models, seed, args.episodes, args.envs,
-        not args.stochastic)]
+    played = []
+    for seed in args.seeds:
+      played += play(spec, config, models, seed, args.episodes, args.envs,
+                     not args.stochastic)
+      log(f'model {index + 1}/{len(args.checkpoint)}, seed {seed}: '
+          f'{args.episodes} episodes, success '
+          f'{100 * np.mean([e["success"] for e in played[-args.episodes:]]):.1f}%')
     episodes += played
     per_model.append({'checkpoint': state['checkpoint'],
                       'iteration': state['iteration'],
@@ -254,13 +266,13 @@ def evaluate(args: EvalArgs) -> dict:
                       'success': float(np.mean([e['success']
                                                 for e in played]))})
     if args.video and len(per_model) == 1:
-      film(spec, config, models, args.seeds[0], args.video,
-           (args.width, args.height), not args.stochastic)
+      filmed = film(spec, config, models, args.seeds[0], args.video,
+                    (args.width, args.height), not args.stochastic)[1]
   success, success_se = mean_and_error([e['success'] for e in episodes])
   ret, ret_se = mean_and_error([e['return'] for e in episodes])
   out = {'description': description, 'episodes': len(episodes),
          'success': success, 'success_se': success_se, 'return': ret,
-         'return_se': ret_se, 'models': per_model}
+         'return_se': ret_se, 'models': per_model, 'filmed_success': filmed}
   if len(per_model) > 1:
     out['success_se_models'] = mean_and_error(
         [m['success'] for m in per_model])[1]
@@ -270,7 +282,8 @@ def evaluate(args: EvalArgs) -> dict:
 def main(argv=None):
   args = cli.parse(EvalArgs, argv, description=__doc__.splitlines()[0])
   try:
-    out = evaluate(args)
+    out = evaluate(args, log=lambda line: print(line, file=sys.stderr,
+                                                 flush=True))
   except cli.user_errors() as e:
     cli.fail('coop-eval', e)
   print(f'{out["description"]}: {len(args.checkpoint)} model(s) x '
@@ -287,7 +300,8 @@ def main(argv=None):
   print(line)
   print(f'mean return {out["return"]:.2f} +- {out["return_se"]:.2f}')
   if args.video:
-    print(f'video: {args.video}')
+    print(f'video: {args.video} (the filmed episode '
+          f'{"succeeded" if out["filmed_success"] else "failed"})')
   print(json.dumps({k: out[k] for k in ('success', 'success_se', 'return',
                                          'return_se', 'episodes')}))
 

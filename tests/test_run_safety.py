@@ -174,10 +174,15 @@ def test_resume_and_eval_fall_back_from_a_damaged_checkpoint(
   controller_file = os.path.join(logdir, 'controller', 'config.json')
   before = os.stat(controller_file)
 
-  evaluate.main(['--checkpoint', logdir, '--episodes', '1', '--envs', '1'])
+  video = str(tmp_path / 'episode.mp4')
+  evaluate.main(['--checkpoint', logdir, '--episodes', '1', '--envs', '1',
+                 '--video', video, '--width', '64', '--height', '48'])
   captured = capsys.readouterr()
   assert learner_file in captured.err and 'ckpt_00000002' in captured.err
+  assert 'model 1/1, seed 0: 1 episodes, success 0.0%' in captured.err
   assert 'success rate' in captured.out
+  # The tiny policy does not move a cylinder in 0.8 s.
+  assert f'video: {video} (the filmed episode failed)' in captured.out
 
   summary = learner_loop.train(_args(logdir, controller, resume=True,
                                      total_steps=3 * STEPS))
