@@ -152,3 +152,14 @@ def test_renders_when_dm_control_was_imported_first_without_mujoco_gl():
                           check=False)
   assert result.returncode == 0, result.stderr[-2000:]
   assert result.stdout.strip().endswith("(24, 32, 3)")
+
+
+def test_target_zone_is_not_the_cylinders_colour():
+  env = coop_suite.load("transport", 2)
+  model = env.physics.model
+  target = model.site("target").rgba[:3]
+  cylinder = model.geom_rgba[model.body_geomadr[
+      model.body(env.task.cylinder.mjcf_model.find_all("body")[0]
+                 .full_identifier).id]][:3]
+  assert np.abs(target - cylinder).max() > 0.5  # Tells them apart.
+  env.close()

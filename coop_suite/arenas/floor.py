@@ -13,6 +13,11 @@ import numpy as np
 TERRAIN_GROUP = 0
 
 
+TARGET_RGBA = (0.1, 0.9, 0.2, 0.5)
+"""Where to go is green (the target zone, like the finish lines); the
+object to move is red (`props.Cylinder`): docs/tasks.md's colour code."""
+
+
 class Floor(composer.Arena):
   """A square floor, a target zone marker and a framing camera."""
 
@@ -60,7 +65,7 @@ class Floor(composer.Arena):
     self.target_position = np.zeros(2)
     self.target_site = root.worldbody.add(
         "site", name="target", type="cylinder", size=(target_radius, 0.005),
-        pos=(0, 0, 0.005), rgba=(0.9, 0.1, 0.1, 0.5), group=0)
+        pos=(0, 0, 0.005), rgba=TARGET_RGBA, group=0)
     # A fixed camera whose pose `runners.video` sets each frame to frame the
     # agents and the task object.
     self.framing_camera = root.worldbody.add(
