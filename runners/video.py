@@ -8,6 +8,7 @@ Rendering uses MuJoCo's offscreen EGL context (`MUJOCO_GL=egl` is set by
 """
 
 import argparse
+import collections
 import dataclasses
 import os
 import sys
@@ -108,13 +109,25 @@ def parse_args(argv=None):
   return VideoArgs(**vars(parser.parse_args(argv)))
 
 
+def population(species):
+  """Who is in the picture, e.g. ('crosser', 'crosser', 'pusher') ->
+  '2 crossers and 1 pusher'; one species of 'ant' -> '4 agents'."""
+  counts = collections.Counter(species)
+  if set(counts) == {"ant"}:
+    return f"{counts['ant']} agent{'s' * (counts['ant'] != 1)}"
+  return " and ".join(f"{n} {kind}{'s' * (n != 1)}"
+                      for kind, n in counts.items())
+
+
 def main(argv=None):
   args = parse_args(argv)
   frames = record(args)
   for path in (args.out, args.png):
     if path:
       print(f"wrote {path} ({os.path.getsize(path) / 1e3:.0f} kB)")
-  print(f"{frames} frames of {args.task} with {args.n_agents} agents")
+  env = coop_suite.load(args.task, args.n_agents)  # For its species only.
+  print(f"{frames} frames of {args.task} with {population(env.task.species)}")
+  env.close()
 
 
 if __name__ == "__main__":
