@@ -174,13 +174,11 @@ class _Filming:
   """A bare environment that films itself until its first episode ends."""
 
   def __init__(self, env, path, size):
-    import imageio  # pylint: disable=g-import-not-at-top
     from coop_suite import camera  # pylint: disable=g-import-not-at-top
+    from runners import video  # pylint: disable=g-import-not-at-top
     self._env, self._size = env, size
     self._camera, self._render = camera.FramingCamera(), camera.render
-    self._writer = imageio.get_writer(
-        path, fps=round(1 / env.control_timestep()), codec='libx264',
-        quality=7, macro_block_size=8)
+    self._writer = video.open_video(path, round(1 / env.control_timestep()))
     self.frames, self.done, self.success = 0, False, None
 
   def __getattr__(self, name):
@@ -217,7 +215,6 @@ def film(spec, config, models, seed: int, path: str, size=(640, 480),
   """Writes one episode to the mp4 `path`; returns (frames, whether the
   episode succeeded)."""
   from runners import rollout  # pylint: disable=g-import-not-at-top
-  os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
   filming = []
   batch = rollout.EnvBatch(
       spec, config, [seed], global_state=False,

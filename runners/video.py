@@ -14,6 +14,12 @@ import os
 import sys
 
 os.environ.setdefault("MUJOCO_GL", "egl")
+# imageio-ffmpeg starts ffmpeg with `preexec_fn=os.setpgrp` (to keep Ctrl-C
+# from it), which makes Python run its fork handlers in a process where JAX
+# (coop-eval) already runs threads: unsafe, and JAX warns "os.fork() ...
+# deadlock" at every video. Without it ffmpeg shares our Ctrl-C, which is
+# harmless: the writer is closed on the way out.
+os.environ.setdefault("IMAGEIO_FFMPEG_NO_PREVENT_SIGINT", "1")
 
 import imageio  # pylint: disable=g-import-not-at-top
 import numpy as np
@@ -49,6 +55,14 @@ class VideoArgs:
   """Frames per second of the video (one frame per control step at 20)."""
 
 
+def open_video(path, fps):
+  """An mp4 writer (H.264) at `path` for uint8 frames [height, width, 3];
+  `append_data(frame)`, then `close()`."""
+  os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+  return imageio.get_writer(path, fps=fps, codec="libx264", quality=7,
+                            macro_block_size=8)
+
+
 def make_policy(name, env, seed):
   """A function timestep -> actions [n_agents, 8] for a non-learned policy."""
   if name not in POLICIES:
@@ -73,9 +87,7 @@ def record(args: VideoArgs, policy=None):
   frame_every = max(1, int(round(1.0 / (args.fps * control_dt))))
   writer = None
   if args.out:
-    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-    writer = imageio.get_writer(args.out, fps=args.fps, codec="libx264",
-                                quality=7, macro_block_size=8)
+    writer = open_video(args.out, args.fps)
   frames = 0
   try:
     for step in tqdm.trange(steps, desc=f"recording {args.task}",
