@@ -6,7 +6,9 @@ import pytest
 
 import coop_suite
 
-pytest.importorskip("ray.rllib", reason="RLlib is the optional [rllib] extra")
+# ray.rllib ships inside ray but imports only with the [rllib] extra.
+pytest.importorskip("ray.rllib", reason="RLlib is the optional [rllib] extra",
+                    exc_type=ImportError)
 # pylint: disable=g-import-not-at-top,wrong-import-position
 from ray.rllib.env import multi_agent_env
 from ray.rllib.utils.pre_checks import env as rllib_checks
