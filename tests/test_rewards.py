@@ -35,6 +35,11 @@ def test_reward_functions_by_hand():
       pytest.approx(2.5))
 
 
+def _hold_steps(env):
+  """Control steps the cylinder must rest in the zone to count."""
+  return int(round(env.task.config.hold_time / env.control_timestep()))
+
+
 @pytest.mark.parametrize("end_on_success", [False, True])
 def test_transport_success_pays_everyone_once(end_on_success):
   env = coop_suite.load("transport", 3, seed=1, end_on_success=end_on_success)
@@ -42,6 +47,12 @@ def test_transport_success_pays_everyone_once(end_on_success):
   task, physics = env.task, env.physics
   target = task.arena.target_position
   layouts.place_prop(task.cylinder, physics, [*target, task.cylinder.height / 2])
+  # At rest inside the zone: a success only once held for `hold_time`.
+  for _ in range(_hold_steps(env) - 1):
+    timestep = env.step(_zeros(env))
+    assert timestep.mid() and all(r < 50.0 for r in timestep.reward)
+  assert env.episode_metrics()["success"] is False
+  assert env.episode_metrics()["reached"] is True
   timestep = env.step(_zeros(env))
   # Success ends the episode only on request; by default the shaping terms
   # keep paying until the time limit (see TaskConfig.end_on_success).
@@ -67,16 +78,41 @@ def test_transport_success_pays_everyone_once(end_on_success):
     assert env.episode_metrics()["reward/success"] == 50.0
 
 
-def test_transport_moving_cylinder_is_not_resting():
+def test_transport_cylinder_sliding_through_the_zone_is_no_success():
   env = coop_suite.load("transport", 2, seed=1)
   env.reset()
   task, physics = env.task, env.physics
-  layouts.place_prop(task.cylinder, physics,
-                     [*task.arena.target_position, task.cylinder.height / 2])
+  target = task.arena.target_position
+  layouts.place_prop(task.cylinder, physics, [*target, task.cylinder.height / 2])
   task.cylinder.set_velocity(physics, velocity=[3.0, 0.0, 0.0])
-  timestep = env.step(_zeros(env))
+  for _ in range(3 * _hold_steps(env)):
+    timestep = env.step(_zeros(env))
   assert timestep.mid()
-  assert not env.episode_metrics()["success"]
+  metrics = env.episode_metrics()
+  assert metrics["reached"] is True and metrics["success"] is False
+  assert metrics["cylinder_target_distance"] > task.config.target_radius
+
+
+def test_transport_leaving_the_zone_restarts_the_hold():
+  env = coop_suite.load("transport", 2, seed=1)
+  env.reset()
+  task, physics = env.task, env.physics
+  target = task.arena.target_position
+
+  def place(xy):
+    layouts.place_prop(task.cylinder, physics, [*xy, task.cylinder.height / 2])
+
+  place(target)
+  for _ in range(_hold_steps(env) - 2):
+    env.step(_zeros(env))
+  place(target + 2.0)  # Out for one step...
+  env.step(_zeros(env))
+  place(target)  # ...and back: the hold starts again.
+  for _ in range(_hold_steps(env) - 1):
+    env.step(_zeros(env))
+  assert env.episode_metrics()["success"] is False
+  env.step(_zeros(env))
+  assert env.episode_metrics()["success"] is True
 
 
 @pytest.mark.parametrize("end_on_success", [False, True])

@@ -511,6 +511,13 @@ class CoopTask(composer.Task):
       value = cache[name] = fn()
       return value
 
+  def state_changed(self):
+    """Forgets the values cached for the current state (frames, features,
+    `per_state`). Call it after editing the physics by hand outside `step`,
+    e.g. placing a walker or a prop in a test: the cache is keyed on steps,
+    resets and the simulation time, which such an edit does not change."""
+    self._state_version += 1
+
   def _per_state_cache(self, physics):
     """A dict for values of the current physics state, emptied when the
     state changes (a step, a reset, or time moving on outside `step`).

@@ -29,6 +29,33 @@ def ring(n, center, min_radius, random_state, jitter=0.2, offset=np.pi / 4):
       [radii * np.cos(angles), radii * np.sin(angles)], -1)
 
 
+def annulus(n, center, radii, random_state, spacing=ANT_SPACING,
+            attempts=1000):
+  """`n` points drawn uniformly (by area) over the annulus `radii` = (inner,
+  outer) around `center`, at least `spacing` apart.
+
+  No pattern is imposed: several agents may start on one side, some near and
+  some far. Each point is redrawn until it clears the ones before it; the
+  outer radius grows by 10% whenever `attempts` draws in a row fail (a dense
+  population still fits). Returns: [n, 2] world xy (metres).
+  """
+  inner, outer = float(radii[0]), float(radii[1])
+  if not 0 <= inner <= outer:
+    raise ValueError(f"radii must be 0 <= inner <= outer, got {radii}.")
+  points = []
+  while len(points) < n:
+    for _ in range(attempts):
+      radius = np.sqrt(random_state.uniform(inner ** 2, outer ** 2))
+      angle = random_state.uniform(-np.pi, np.pi)
+      point = radius * np.array([np.cos(angle), np.sin(angle)])
+      if all(np.linalg.norm(point - q) >= spacing for q in points):
+        points.append(point)
+        break
+    else:
+      outer *= 1.1
+  return np.asarray(center) + np.array(points).reshape(n, 2)
+
+
 def arc(n, center, min_radius, facing, max_spread=0.8 * np.pi):
   """`n` points on an arc at one distance from `center`, opening away from it.
 
