@@ -228,47 +228,50 @@ class CorridorGreedy:
 
 
 class CorridorOracle:
-  """World state and memory: one agent at a time, nearest to the slit
-  first. The others wait on an arc 2.5 m before the slit, each at its own
-  spot; the next one goes when the one before has passed the slit's exit,
-  and agents through the slit walk on to spread out along the finish
-  line."""
+  """World state and memory: one agent at a time, the one in the middle of
+  the start arc first, then outwards. The others hold their start places,
+  except the next in line, which waits 2 m before the slit's mouth; it goes
+  in when the one before has passed the slit's exit. Agents through the
+  slit walk on to spread out beyond the finish line."""
+
+  STAGING = 2.0
+  """The next agent in line waits this far before the slit's mouth (m)."""
 
   def __init__(self, env, random_state):
     del random_state
     arena = env.task.arena
     self._entrance = np.asarray(arena.slit_entrance, np.float64)
     self._exit = np.asarray(arena.slit_exit, np.float64)
+    self._axis = (self._exit - self._entrance) / np.linalg.norm(
+        self._exit - self._entrance)
     self._finish_x = arena.finish_x
     self._queue = None
+    self._starts = None
     self._turn = 0
 
   def __call__(self, env, observation):
     frames = env.task.frames(env.physics)
     agents = frames.position[:, :2]
-    n = len(agents)
-    axis = (self._exit - self._entrance) / np.linalg.norm(
-        self._exit - self._entrance)
-    if self._queue is None:
-      self._queue = np.argsort(np.linalg.norm(agents - self._entrance,
-                                              axis=1))
+    n, axis = len(agents), self._axis
+    if self._queue is None:  # Centre first: least off the slit's axis.
+      offset = (agents - self._entrance) @ _perp(axis)
+      self._queue = np.argsort(np.abs(offset), kind='stable')
+      self._starts = agents.copy()
     through = (agents - self._exit) @ axis > 0.3
     while self._turn < n and through[self._queue[self._turn]]:
       self._turn += 1
-    goals = np.empty((n, 2))
+    mouth = self._entrance - 0.6 * axis
+    goals = self._starts.copy()  # Hold the start place by default.
     for rank, agent in enumerate(self._queue):
       if through[agent]:
         lateral = (rank - (n - 1) / 2) * 1.8
         goals[agent] = (self._finish_x + 1.0, lateral)
       elif rank == self._turn:
-        mouth = self._entrance - 0.6 * axis
         close = np.linalg.norm(agents[agent] - mouth) < 0.6 or (
             (agents[agent] - self._entrance) @ axis > -0.3)
         goals[agent] = self._exit + 2.0 * axis if close else mouth
-      else:
-        angle = np.pi + (rank - self._turn - (n - 1) / 2) * 0.45
-        goals[agent] = self._entrance + (2.5 + 0.6 * (rank - self._turn)) * (
-            np.array([np.cos(angle), np.sin(angle)]))
+      elif rank == self._turn + 1:
+        goals[agent] = self._entrance - self.STAGING * axis
     return clip_norm(frames.to_heading_frame(goals), 3.0)
 
 

@@ -120,8 +120,9 @@ def _place_cylinder_on_target(env):
 
 
 def test_hand_made_success_is_termination_not_truncation():
+  # hold_time=0: the success counts on the step the cylinder rests inside.
   env = coop_suite.pettingzoo_env("transport", 3, time_limit=0.5,
-                                  end_on_success=True)
+                                  end_on_success=True, hold_time=0.0)
   env.reset(seed=0)
   _place_cylinder_on_target(env)
   _, rewards, terminations, truncations, infos = env.step(_zeros(env))
@@ -132,7 +133,8 @@ def test_hand_made_success_is_termination_not_truncation():
 
 
 def test_success_runs_on_to_the_time_limit_by_default():
-  env = coop_suite.pettingzoo_env("transport", 3, time_limit=0.5)
+  env = coop_suite.pettingzoo_env("transport", 3, time_limit=0.5,
+                                  hold_time=0.0)
   env.reset(seed=0)
   _place_cylinder_on_target(env)
   _, rewards, terminations, truncations, _ = env.step(_zeros(env))
