@@ -26,7 +26,8 @@ HIERARCHY_FIELDS = (
     'agent', 'seed', 'sequence_length', 'num_epochs', 'num_minibatches',
     'learning_rate', 'entropy_cost', 'discount', 'gae_lambda',
     'reward_scaling', 'upper_layer_sizes', 'middle_layer_size', 'head_sizes',
-    'critic_sizes', 'flat_sizes')
+    'critic_sizes', 'flat_sizes', 'critic', 'normalize_values', 'target_kl',
+    'min_action_std', 'max_grad_norm')
 # Fields that may change when a run is resumed (the rest must match).
 RESUMABLE_CHANGES = ('actors', 'envs_per_actor', 'total_steps', 'logdir',
                      'ray_address', 'resume', 'resume_from',
@@ -48,8 +49,10 @@ class TrainArgs:
   actors: int = 2
   """Actor processes on Ray; 0 runs the same actor and learner in this
   process without Ray (debugging, tests)."""
-  envs_per_actor: int = 8
-  """Environment copies each actor steps (one batched policy call each)."""
+  envs_per_actor: int = 16
+  """Environment copies each actor steps (one batched policy call each).
+  With 2 actors, 4 agents and --sequence-length 32: 4,096 commands per
+  update."""
   total_steps: int = 20_000_000
   """Low-level environment steps to train for (0.05 s control steps of one
   environment copy), rounded up to whole iterations."""
@@ -122,6 +125,18 @@ class TrainArgs:
   """mappo: centralised critic widths."""
   flat_sizes: tuple[int, ...] = _H.flat_sizes
   """flat: policy and value MLP widths."""
+  critic: str = _H.critic
+  """Critic structure: separate (own upper and middle layer), stop_gradient
+  (value head on the policy's features, no gradient into them) or shared
+  (the first run's layout)."""
+  normalize_values: bool = _H.normalize_values
+  """The critic predicts standardised returns (running statistics)."""
+  target_kl: float = _H.target_kl
+  """KL target of the adaptive learning rate; 0 keeps it constant."""
+  min_action_std: float = _H.min_action_std
+  """Floor of the command's std (pre-tanh units)."""
+  max_grad_norm: float = _H.max_grad_norm
+  """Gradients are rescaled to at most this global L2 norm."""
 
   def __post_init__(self):
     if self.paradigm not in PARADIGMS:

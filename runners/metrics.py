@@ -8,6 +8,8 @@ One row per iteration goes to `metrics.csv` and TensorBoard (through
   episodes, return, success, reward/<term>,  means over the last `window`
   <task progress figures>                     ended episodes (`episode_metrics`)
   learner/<species>/<loss>                   the update's PPO figures
+                                             (`LOSS_METRICS`; value_loss in
+                                             normalised units)
   time/collect, time/learn, restarts         where the time went, actor deaths
 """
 import collections
@@ -18,7 +20,8 @@ from typing import Any, Iterable
 import numpy as np
 
 LOSS_METRICS = ('total_loss', 'policy_loss', 'value_loss', 'entropy',
-                'approx_kl', 'clip_fraction', 'grad_norm')
+                'approx_kl', 'clip_fraction', 'grad_norm', 'learning_rate',
+                'action_std', 'explained_variance')
 COUNTERS = ('update', 'env_steps', 'agent_steps', 'wall_time', 'sps',
             'agent_sps', 'episodes')
 _SKIP = ('env', 'control_steps')  # Per-episode bookkeeping, not figures.

@@ -236,3 +236,35 @@ def test_evaluation_prints_success_rate_and_films(hrl_run, tmp_path, capsys):
   assert 'transport with 3 agents' in out
   assert 'success rate 0.0% +- 0.0% (standard error over 6 episodes)' in out
   assert video.stat().st_size > 0
+
+
+def test_the_stability_figures_are_logged_and_checkpointed(hrl_run):
+  rows = _rows(hrl_run)
+  for name in ('value_loss', 'approx_kl', 'learning_rate', 'action_std',
+               'grad_norm', 'explained_variance'):
+    values = [float(r[f'learner/ant/{name}']) for r in rows]
+    assert all(np.isfinite(values)), name
+  # The std floor holds (softplus + 0.1), the rate stays within its bounds.
+  assert all(float(r['learner/ant/action_std']) > 0.1 for r in rows)
+  assert all(0 < float(r['learner/ant/learning_rate']) <= 1e-2 for r in rows)
+  # The value statistics travel in the checkpoint: 2 iterations of 4
+  # commands x 4 rows (2 copies x 2 agents).
+  checkpoint = checkpoints.resolve(hrl_run)
+  state = checkpoints.read_state(checkpoint)
+  config = hierarchy_config.HierarchyConfig(**state['agent_config'])
+  saved = state['species'][0]
+  builder = hierarchy_builder.HierarchyBuilder(config, saved['species_id'])
+  learner = builder.make_learner(builder.make_networks(
+      saved['observation_size'], saved['action_size'],
+      saved['global_state_size']))
+  learner.restore(os.path.join(checkpoint, 'ant.msgpack'))
+  assert float(learner.state.value_normalizer.count) == 2 * 4 * 4
+  assert int(learner.state.step) == 2
+
+
+def test_the_first_transport_run_still_evaluates(capsys):
+  """The shipped checkpoint of the first layout (format 1) loads."""
+  best = os.path.join(os.path.dirname(__file__), '..', 'results',
+                      'transport_hrl_n4_s0', 'checkpoints', 'best')
+  evaluate.main(['--checkpoint', best, '--episodes', '1', '--envs', '1'])
+  assert 'iteration 4115' in capsys.readouterr().out
