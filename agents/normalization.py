@@ -1,4 +1,5 @@
-"""Running mean / variance of observations, for input normalisation.
+"""Running mean / variance of observations, for input normalisation (and of
+value targets, for value normalisation: `agents.ppo.returns`).
 
 Observations of a walker mix metres, radians and m/s, so networks train much
 better on standardised inputs. The statistics are a NamedTuple with pure

@@ -8,9 +8,11 @@ selected by `HierarchyConfig.agent`.
 
 config.py    HierarchyConfig: agent variant and hyper-parameters.
 types.py     SequenceBatch (what actors send) and its training form.
-modules.py   Flax modules: upper layer, resetting GRU middle layer, heads.
+modules.py   Flax modules: upper layer, resetting GRU middle layer, heads,
+             the critic (its own layers, stop-gradient or shared).
 networks.py  HierarchyNetworks: pure `init` / `unroll` / `step` functions.
 learning.py  Recurrent PPO update (truncated BPTT) and HierarchyLearner.
+legacy.py    Reads learner files of the first layout (format 1).
 acting.py    HierarchyActor: B agents at once, GRU state carried per row.
 builder.py   HierarchyBuilder: config -> networks -> learner / actors.
 """
