@@ -14,8 +14,8 @@ order) for one synchronous PPO iteration:
 Ray notes (see docs/training.md): actors run with `JAX_PLATFORMS=cpu` and
 single-threaded XLA/OpenMP, set through the actor's runtime environment
 before JAX starts; they never fork. `init_ray` starts a local instance
-quietly, listening on loopback only, with no dashboard and no metrics
-endpoint; `--ray-address` joins a cluster with the cluster's own settings.
+quietly, listening on loopback only (its remaining Prometheus endpoints
+too), with no dashboard and no core metrics; `--ray-address` joins a cluster with the cluster's own settings.
 """
 import logging
 import time
@@ -93,7 +93,7 @@ def init_ray(address: str = '', num_cpus: Optional[int] = None) -> bool:
   ray_constants.ENABLE_RAY_CLUSTER = False
   try:
     ray.init(num_cpus=num_cpus, include_dashboard=False,
-             # No Prometheus endpoint: nothing here reads it.
+             # No core metrics collection: nothing here reads it.
              _system_config={'enable_metrics_collection': False}, **quiet)
   finally:
     ray_constants.ENABLE_RAY_CLUSTER = cluster_mode

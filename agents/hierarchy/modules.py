@@ -95,7 +95,7 @@ class HierarchyPolicyValue(nn.Module):
 
     Args:
       carry: [B, C] ML state before step 0 (before reset[0] applies); C = H,
-        or 2H with a separate recurrent critic (policy's, critic's).
+        or 2H with a separate critic (the policy's, then the critic's).
       observation: [T, B, D] normalised observations.
       reset: [T, B] bool, true where observation[t] starts an episode.
       global_state: [T, B, S] normalised global state ('mappo' only).
