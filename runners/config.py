@@ -33,7 +33,7 @@ RESUMABLE_CHANGES = ('actors', 'envs_per_actor', 'total_steps', 'logdir',
                      'ray_address', 'resume', 'resume_from',
                      'checkpoint_every',
                      'keep_checkpoints', 'keep_best', 'max_actor_restarts',
-                     'progress', 'controller', 'window')
+                     'progress', 'controller', 'window', 'init_from')
 
 
 @dataclasses.dataclass(frozen=True)
@@ -78,6 +78,12 @@ class TrainArgs:
   """Seconds between two commands of the middle layer."""
   stage: str = 'joint'
   """Ravine only: curriculum stage joint, pushers or crossers."""
+  init_from: tuple[str, ...] = ()
+  """Start species from other runs, as SPECIES=PATH pairs (the ravine's
+  curriculum: pusher=RUN_A crosser=RUN_B); PATH is a run directory (its
+  newest complete checkpoint) or a checkpoint directory. Each named species
+  takes that run's parameters and normalisers with a fresh optimiser; a
+  resumed run continues from its own checkpoint instead."""
   n_pushers: int = 2
   """Ravine only: number of pushers."""
   time_limit: float = 0.0
@@ -163,6 +169,8 @@ class TrainArgs:
       raise ValueError('--command-period must be a finite number of seconds '
                        f'> 0, got {self.command_period}.')
     check_time_limit(self.time_limit)
+    object.__setattr__(self, 'init_from', tuple(self.init_from))
+    self.init_sources()  # Checks the pairs.
     if self.max_actor_restarts < -1:
       raise ValueError('--max-actor-restarts must be >= 0, or -1 for '
                        f'without limit, got {self.max_actor_restarts}.')
@@ -170,6 +178,19 @@ class TrainArgs:
                  'flat_sizes'):
       object.__setattr__(self, name, tuple(getattr(self, name)))
     hierarchy_config(self)  # Checks the agent's fields, naming the flag.
+
+  def init_sources(self) -> dict[str, str]:
+    """`init_from` as {species: path}; ValueError naming the bad pair."""
+    sources = {}
+    for pair in self.init_from:
+      species, _, path = str(pair).partition('=')
+      if not species or not path:
+        raise ValueError(f'--init-from takes SPECIES=PATH pairs (e.g. '
+                         f'pusher=runs/ravine_pushers), got {pair!r}.')
+      if species in sources:
+        raise ValueError(f'--init-from names species {species!r} twice.')
+      sources[species] = path
+    return sources
 
   @property
   def num_actors(self) -> int:

@@ -127,6 +127,46 @@ def train(args: config_lib.TrainArgs,
         ray.shutdown()
 
 
+def make_learners(config, layout) -> dict[str, Any]:
+  """A fresh learner per species: {species name: HierarchyLearner}."""
+  learners = {}
+  for s in layout:
+    builder = hierarchy_builder.HierarchyBuilder(config, s.species_id)
+    learners[s.name] = builder.make_learner(builder.make_networks(
+        s.observation_size, s.action_size, s.global_state_size))
+  return learners
+
+
+def initialize_from_runs(args: config_lib.TrainArgs,
+                         learners: dict[str, Any]) -> None:
+  """`--init-from`: each named species starts from its learner in another
+  run of the same task (parameters and normalisers, fresh optimiser).
+
+  Raises:
+    ValueError: a species this run lacks or the other run lacks, a run of
+      another task, or other networks (naming the file).
+    FileNotFoundError: a path that holds no checkpoint.
+  """
+  for species, path in args.init_sources().items():
+    where = f'--init-from {species}={path}'
+    if species not in learners:
+      raise ValueError(f'{where}: this run has no species {species!r}; it '
+                       f'has {sorted(learners)}.')
+    source = checkpoints.resolve(path)
+    saved = checkpoints.read_state(source)
+    task = saved.get('args', {}).get('task')
+    if task != args.task:
+      raise ValueError(f'{where}: {source} is a {task!r} run, this one is '
+                       f'{args.task!r}.')
+    names = [s['name'] for s in saved.get('species', [])]
+    if species not in names:
+      raise ValueError(f'{where}: {source} has species {names}, not '
+                       f'{species!r}.')
+    learners[species].initialize_from(
+        os.path.join(source, f'{species}.msgpack'))
+    print(f'{species}: parameters and normalisers from {source}', flush=True)
+
+
 def _train(args, checkpoint, on_iteration):
   config = config_lib.hierarchy_config(args)
   spec = environment_spec(args)
@@ -141,11 +181,9 @@ def _train(args, checkpoint, on_iteration):
   if spec.controller_files and not _has_controller_copy(args):
     # Once the settings are known to work; whole or not at all.
     run_dir.write_directory(_controller_copy(args), spec.controller_files)
-  learners = {}
-  for s in layout:
-    builder = hierarchy_builder.HierarchyBuilder(config, s.species_id)
-    learners[s.name] = builder.make_learner(builder.make_networks(
-        s.observation_size, s.action_size, s.global_state_size))
+  learners = make_learners(config, layout)
+  if checkpoint is None:
+    initialize_from_runs(args, learners)
   counters = {'iteration': 0, 'env_steps': 0, 'episodes': 0,
               'wall_time': 0.0, 'restarts': 0}
   window = metrics_lib.EpisodeWindow(keys, args.window, dt)

@@ -268,3 +268,68 @@ def test_the_first_transport_run_still_evaluates(capsys):
                       'transport_hrl_n4_s0', 'checkpoints', 'best')
   evaluate.main(['--checkpoint', best, '--episodes', '1', '--envs', '1'])
   assert 'iteration 4115' in capsys.readouterr().out
+
+
+@pytest.fixture(scope='module')
+def ravine_stages(tmp_path_factory, controller):
+  """Tiny runs of the ravine's two pretraining stages: {species: run dir}."""
+  runs = {}
+  for stage, species in (('pushers', 'pusher'), ('crossers', 'crosser')):
+    logdir = tmp_path_factory.mktemp('stages') / stage
+    learner_loop.train(_args(logdir, controller, task='ravine', stage=stage))
+    runs[species] = str(logdir)
+  return runs
+
+
+def _joint_learners(args):
+  config = config_lib.hierarchy_config(args)
+  layout = learner_loop.probe(learner_loop.environment_spec(args), config)[0]
+  return learner_loop.make_learners(config, layout)
+
+
+def test_init_from_starts_each_species_from_its_stage_run(
+    controller, ravine_stages, tmp_path):
+  args = _args(tmp_path / 'joint', controller, task='ravine', stage='joint',
+               init_from=tuple(f'{s}={d}' for s, d in ravine_stages.items()))
+  learners = _joint_learners(args)
+  fresh = {n: jax.device_get(l.state) for n, l in learners.items()}
+  learner_loop.initialize_from_runs(args, learners)
+  for species, run in ravine_stages.items():
+    checkpoint = checkpoints.resolve(run)
+    saved = _joint_learners(args)[species]
+    saved.restore(os.path.join(checkpoint, f'{species}.msgpack'))
+    got, want = jax.device_get(learners[species].state), jax.device_get(
+        saved.state)
+    for name in ('params', 'normalizer', 'value_normalizer'):
+      jax.tree.map(np.testing.assert_array_equal, getattr(got, name),
+                   getattr(want, name))
+    assert int(want.step) > 0 and int(got.step) == 0  # Fresh optimiser.
+    jax.tree.map(np.testing.assert_array_equal, got.opt_state,
+                 fresh[species].opt_state)
+  # And through the whole run: it trains on from there.
+  learner_loop.train(args)
+  assert len(_rows(args.logdir)) == 2
+
+
+def test_init_from_refuses_what_does_not_fit(controller, ravine_stages,
+                                              hrl_run, tmp_path):
+  joint = dict(task='ravine', stage='joint')
+  cases = [
+      ((f'ant={ravine_stages["pusher"]}',), ValueError, "no species 'ant'"),
+      ((f'crosser={ravine_stages["pusher"]}',), ValueError,
+       r"has species \['pusher'\], not 'crosser'"),
+      ((f'pusher={hrl_run}',), ValueError, "is a 'transport' run"),
+      ((f'pusher={tmp_path / "missing"}',), FileNotFoundError,
+       'No checkpoint'),
+  ]
+  for init_from, error, match in cases:
+    args = _args(tmp_path / 'joint', controller, init_from=init_from, **joint)
+    with pytest.raises(error, match=match):
+      learner_loop.initialize_from_runs(args, _joint_learners(args))
+  with pytest.raises(ValueError, match='SPECIES=PATH'):
+    _args(tmp_path / 'x', controller, init_from=('pusher',), **joint)
+  # Another network: named, not silently loaded.
+  args = _args(tmp_path / 'joint', controller, middle_layer_size=16,
+               init_from=(f'pusher={ravine_stages["pusher"]}',), **joint)
+  with pytest.raises(ValueError, match='pusher.msgpack.*(structure|shapes)'):
+    learner_loop.initialize_from_runs(args, _joint_learners(args))

@@ -266,6 +266,37 @@ class HierarchyLearner(core.Learner):
     checkpointing.save_state(path, self._state, self._checkpoint_kind,
                              _CHECKPOINT_FORMAT)
 
+  def _read_state_dict(self, path: str) -> dict[str, Any]:
+    """The state dict of a file written by `save`, in today's layout."""
+    file_format, state_dict = checkpointing.read(path, self._checkpoint_kind)
+    if file_format == legacy.FORMAT:
+      return legacy.convert(state_dict, self._state, self._optimizer)
+    if file_format != _CHECKPOINT_FORMAT:
+      raise ValueError(f'{path} is a {self._checkpoint_kind} checkpoint of '
+                       f'format {file_format}; this version reads formats '
+                       f'{legacy.FORMAT} and {_CHECKPOINT_FORMAT}.')
+    return state_dict
+
+  # What a curriculum stage hands on (`initialize_from`); the rest (optimiser,
+  # update step, key and the global-state statistics, whose size depends on
+  # the population) starts fresh.
+  _HANDED_ON = ('params', 'normalizer', 'value_normalizer')
+
+  def initialize_from(self, path: str) -> None:
+    """Starts from another run's file written by `save` (e.g. a curriculum
+    stage): its parameters and its observation and value statistics, with
+    this learner's fresh optimiser, update step and PRNG key.
+
+    Raises:
+      ValueError: the file is of another variant, or its networks differ
+        from this learner's (naming the file).
+    """
+    state_dict = self._read_state_dict(path)
+    template = {name: getattr(self._state, name) for name in self._HANDED_ON}
+    loaded = checkpointing.from_state_dict(
+        path, template, {name: state_dict[name] for name in self._HANDED_ON})
+    self._state = self._state._replace(**loaded)
+
   def restore(self, path: str) -> None:
     """Loads a file written by `save` with the same networks and config.
 
@@ -273,12 +304,6 @@ class HierarchyLearner(core.Learner):
     are converted (`agents.hierarchy.legacy`): the policy exactly, a
     separate critic as a copy of the shared trunk, a fresh optimiser.
     """
-    file_format, state_dict = checkpointing.read(path, self._checkpoint_kind)
-    if file_format == legacy.FORMAT:
-      state_dict = legacy.convert(state_dict, self._state, self._optimizer)
-    elif file_format != _CHECKPOINT_FORMAT:
-      raise ValueError(f'{path} is a {self._checkpoint_kind} checkpoint of '
-                       f'format {file_format}; this version reads formats '
-                       f'{legacy.FORMAT} and {_CHECKPOINT_FORMAT}.')
+    state_dict = self._read_state_dict(path)
     self._state = checkpointing.from_state_dict(path, self._state,
                                                 state_dict)
