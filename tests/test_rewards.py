@@ -138,14 +138,20 @@ def test_corridor_crossing_pays_all_once_and_success_when_all_crossed(
   assert env.episode_metrics()["success"] is True
 
 
-def test_ravine_joint_success_when_one_crosses_with_any_pays_pushers_once():
-  env = coop_suite.load("ravine", 2, seed=0, success="any")
+def _first_crosser_over_the_line(**options):
+  """A 2-crosser ravine whose first crosser is placed past the finish line
+  and stepped once: (env, timestep, rng)."""
+  env = coop_suite.load("ravine", 2, seed=0, **options)
   env.reset()
-  task, physics = env.task, env.physics
   rng = np.random.RandomState(0)
-  layouts.place(task.walkers[0], physics, [task.arena.finish_x + 0.5, 0.0],
-                0.0, rng)
-  timestep = env.step(_zeros(env))
+  layouts.place(env.task.walkers[0], env.physics,
+                [env.task.arena.finish_x + 0.5, 0.0], 0.0, rng)
+  return env, env.step(_zeros(env)), rng
+
+
+def test_ravine_joint_success_when_one_crosses_with_any_pays_pushers_once():
+  env, timestep, rng = _first_crosser_over_the_line(success="any")
+  task, physics = env.task, env.physics
   assert timestep.mid() and float(timestep.discount) == 1.0
   assert len(timestep.reward) == 4
   assert all(r >= 50.0 for r in timestep.reward)
@@ -158,13 +164,8 @@ def test_ravine_joint_success_when_one_crosses_with_any_pays_pushers_once():
 
 
 def test_ravine_joint_success_needs_every_crosser_by_default():
-  env = coop_suite.load("ravine", 2, seed=0)
-  env.reset()
+  env, timestep, rng = _first_crosser_over_the_line()
   task, physics = env.task, env.physics
-  rng = np.random.RandomState(0)
-  layouts.place(task.walkers[0], physics, [task.arena.finish_x + 0.5, 0.0],
-                0.0, rng)
-  timestep = env.step(_zeros(env))
   assert all(r < 50.0 for r in timestep.reward)
   metrics = env.episode_metrics()
   assert metrics["success"] is False and metrics["crossed"] == 1
@@ -181,16 +182,22 @@ def test_ravine_joint_success_needs_every_crosser_by_default():
   assert all(r < 50.0 for r in timestep.reward)
 
 
+def _first_crosser_into_the_trench(env):
+  """Resets `env` (a ravine), drops its first crosser into the trench 4 m
+  from the stone, steps once and returns the timestep."""
+  env.reset()
+  task, physics = env.task, env.physics
+  stone_y = task.stone.position(physics)[1]
+  y = stone_y + 4.0 if stone_y < 0 else stone_y - 4.0
+  layouts.place(task.walkers[0], physics, [task.arena.ravine_x, y], 0.0,
+                np.random.RandomState(0), ground_z=-task.arena.depth)
+  return env.step(_zeros(env))
+
+
 def test_ravine_all_rule_fails_when_one_crosser_falls():
   for rule, ends in (("all", True), ("any", False)):
     env = coop_suite.load("ravine", 2, stage="crossers", seed=0, success=rule)
-    env.reset()
-    task, physics = env.task, env.physics
-    stone_y = task.stone.position(physics)[1]
-    y = stone_y + 4.0 if stone_y < 0 else stone_y - 4.0
-    layouts.place(task.walkers[0], physics, [task.arena.ravine_x, y], 0.0,
-                  np.random.RandomState(0), ground_z=-task.arena.depth)
-    timestep = env.step(_zeros(env))
+    timestep = _first_crosser_into_the_trench(env)
     assert timestep.last() is ends, rule
     assert env.episode_metrics()["failure"] is ends, rule
 
@@ -202,13 +209,7 @@ def test_ravine_refuses_unknown_success_rule():
 
 def test_ravine_fall_penalty_once_and_failure_when_all_fell():
   env = coop_suite.load("ravine", 1, stage="crossers", seed=0)
-  env.reset()
-  task, physics = env.task, env.physics
-  stone_y = task.stone.position(physics)[1]
-  y = stone_y + 4.0 if stone_y < 0 else stone_y - 4.0
-  layouts.place(task.walkers[0], physics, [task.arena.ravine_x, y], 0.0,
-                np.random.RandomState(0), ground_z=-task.arena.depth)
-  timestep = env.step(ZERO)
+  timestep = _first_crosser_into_the_trench(env)
   assert timestep.last() and float(timestep.discount) == 0.0
   assert env.episode_metrics()["reward/fall"] == -20.0
   assert env.episode_metrics()["failure"] is True

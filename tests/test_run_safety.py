@@ -18,8 +18,8 @@ from runners import learner_loop
 from runners import run_dir
 from runners import train
 from tests.test_train import STEPS
-from tests.test_train import TINY
 from tests.test_train import _args
+from tests.test_train import _argv
 from tests.test_train import _rows
 from tests.test_train import controller  # pylint: disable=unused-import
 
@@ -145,20 +145,6 @@ def run3(tmp_path_factory, controller):  # pylint: disable=redefined-outer-name
   logdir = str(tmp_path_factory.mktemp('runs') / 'three')
   learner_loop.train(_args(logdir, controller, total_steps=3 * STEPS))
   return logdir
-
-
-def _argv(controller, total_steps):  # pylint: disable=redefined-outer-name
-  """The flags of `_args` (tests/test_train.py) for the CLI."""
-  argv = ['--controller', controller, '--total-steps', str(total_steps)]
-  for name, value in TINY.items():
-    flag = '--' + name.replace('_', '-')
-    if isinstance(value, bool):
-      argv.append(flag if value else '--no-' + flag[2:])
-    elif isinstance(value, tuple):
-      argv += [flag, *map(str, value)]
-    else:
-      argv += [flag, str(value)]
-  return argv
 
 
 def test_resume_and_eval_fall_back_from_a_damaged_checkpoint(

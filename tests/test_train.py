@@ -67,6 +67,20 @@ def _args(logdir, controller, **overrides):
   return config_lib.TrainArgs(**values)
 
 
+def _argv(controller, total_steps):  # pylint: disable=redefined-outer-name
+  """The flags of `_args` for the CLI (without --task and --logdir)."""
+  argv = ['--controller', controller, '--total-steps', str(total_steps)]
+  for name, value in TINY.items():
+    flag = '--' + name.replace('_', '-')
+    if isinstance(value, bool):
+      argv.append(flag if value else '--no-' + flag[2:])
+    elif isinstance(value, tuple):
+      argv += [flag, *map(str, value)]
+    else:
+      argv += [flag, str(value)]
+  return argv
+
+
 def _rows(logdir):
   with open(os.path.join(logdir, 'metrics.csv')) as f:
     return list(csv.DictReader(f))
@@ -90,17 +104,8 @@ def _learner_params(checkpoint, species):
 def hrl_run(tmp_path_factory, controller):
   """Two iterations of 'hrl' through the real CLI, in one process."""
   logdir = str(tmp_path_factory.mktemp('runs') / 'hrl')
-  argv = ['--task', 'transport', '--logdir', logdir, '--controller',
-          controller, '--total-steps', str(2 * STEPS)]
-  for name, value in TINY.items():
-    flag = '--' + name.replace('_', '-')
-    if isinstance(value, bool):
-      argv.append(flag if value else '--no-' + flag[2:])
-    elif isinstance(value, tuple):
-      argv += [flag, *map(str, value)]
-    else:
-      argv += [flag, str(value)]
-  train.main(argv)
+  train.main(['--task', 'transport', '--logdir', logdir,
+              *_argv(controller, 2 * STEPS)])
   return logdir
 
 
