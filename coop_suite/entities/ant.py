@@ -1,9 +1,10 @@
 """The Ant walker: a quadruped robot with egocentric proprioception.
 
 The body is dm_control's Ant (same geometry, masses and motors) built from a
-trimmed MJCF (see `assets/ant.xml`). The proprioceptive observables are what
-the lower layer of the hierarchy reads; they are identical in every task so
-that one pretrained walker controller serves them all.
+trimmed MJCF (see `assets/ant.xml`). Its proprioception (`ProprioceptionReader`,
+read for all agents at once by the tasks) is what the lower layer of the
+hierarchy reads; it is identical in every task so that one pretrained walker
+controller serves them all.
 
 Frames: "egocentric" means the torso frame (x forward, y left, z up in the
 torso's own orientation); "heading frame" means the world frame rotated by the
@@ -14,7 +15,6 @@ import os
 
 from dm_control import composer
 from dm_control import mjcf
-from dm_control.composer.observation import observable
 from dm_env import specs
 import numpy as np
 
@@ -30,7 +30,8 @@ NUM_ACTUATORS = 8
 class Ant(composer.Robot):
   """A quadruped Ant with 8 torque-controlled joints and actions in [-1, 1].
 
-  Subclasses may override `_build_observables` to expose other sensors.
+  It has no observables of its own: the tasks compute every agent's
+  features at once (`coop_suite.tasks.base.CoopTask.features`).
   """
 
   def _build(self, name="ant", rgba=None):
@@ -48,9 +49,6 @@ class Ant(composer.Robot):
     self._prev_action = np.zeros(NUM_ACTUATORS)
     self._joint_qpos_adr = None
     self._joint_dof_adr = None
-
-  def _build_observables(self):
-    return AntObservables(self)
 
   @property
   def mjcf_model(self):
@@ -122,10 +120,6 @@ class Ant(composer.Robot):
     """Torso centre, shape [3], world frame (metres)."""
     return physics.data.xpos[self._torso_id]
 
-  def torso_xmat(self, physics):
-    """Torso orientation as a row-major rotation matrix, shape [3, 3]."""
-    return physics.data.xmat[self._torso_id].reshape(3, 3)
-
   def heading(self, physics):
     """Yaw of the torso's x axis in the world frame (radians)."""
     xmat = physics.data.xmat[self._torso_id]
@@ -134,10 +128,6 @@ class Ant(composer.Robot):
   def world_velocity(self, physics):
     """Torso linear velocity, shape [3], world frame (m/s)."""
     return physics.data.qvel[self._free_dof_adr:self._free_dof_adr + 3]
-
-  def local_angular_velocity(self, physics):
-    """Torso angular velocity, shape [3], egocentric frame (rad/s)."""
-    return physics.data.qvel[self._free_dof_adr + 3:self._free_dof_adr + 6]
 
   def upright(self, physics):
     """Cosine between the torso's z axis and the world's z axis."""
@@ -157,20 +147,8 @@ class Ant(composer.Robot):
     return int(np.sum(np.abs(q - centre) > fraction * half))
 
 
-def proprioception(walkers, physics, prev_actions):
-  """Proprioception of several Ants at once: name -> array [n, dim].
-
-  Everything the lower layer reads, in the egocentric (torso) frame:
-    joints_pos [n, 8] rad, joints_vel [n, 8] rad/s, torso_height [n, 1] m
-    (world z), gravity [n, 3] (the world's up axis seen from the torso),
-    velocity [n, 3] m/s, angular_velocity [n, 3] rad/s, prev_action [n, 8].
-  For repeated reads, build a `ProprioceptionReader` once instead.
-  """
-  return ProprioceptionReader(walkers)(physics, prev_actions)
-
-
 class ProprioceptionReader:
-  """Reads `proprioception` of a fixed set of compiled Ants, vectorised.
+  """Reads the proprioception of a fixed set of compiled Ants, vectorised.
 
   The index arrays into `physics.data` are gathered once and one compiled
   kernel reads all Ants: tasks read every agent's proprioception at every
@@ -185,69 +163,18 @@ class ProprioceptionReader:
     self._qpos = np.stack([w._joint_qpos_adr for w in walkers])
     self._dof = np.stack([w._joint_dof_adr for w in walkers])
     self._free = np.array([w._free_dof_adr for w in walkers])
-    self._columns = kernels.proprio_columns()
     self._bound = (None, None)  # (an mjData, views of its arrays).
 
   def state(self, physics, prev_actions):
     """Every Ant's torso frame and proprioception, [n, 5 + PROPRIO_SIZE]:
     x, y, z, cos(yaw), sin(yaw) (`kernels.heading_frames`), then the
-    proprioception in `kernels.PROPRIO_LAYOUT` order (`split` names it)."""
+    proprioception in `kernels.PROPRIO_LAYOUT` order
+    (`kernels.proprio_columns` names it)."""
     data = physics.data.ptr
     if self._bound[0] is not data:  # Views into this mjData, kept with it.
       self._bound = (data, (data.xpos, data.xmat, data.qpos, data.qvel))
     return kernels.agent_state(*self._bound[1], self._torso, self._qpos,
                                self._dof, self._free, prev_actions)
 
-  def split(self, state, prefix=""):
-    """The proprioception columns of `state`, named: prefix + name -> [n, d]
-    (views)."""
-    proprio = state[:, 5:]
-    return {prefix + name: proprio[:, columns]
-            for name, columns in self._columns}
-
-  def __call__(self, physics, prev_actions):
-    return self.split(self.state(
-        physics, np.asarray(prev_actions, dtype=np.float64)))
-
 
 PROPRIOCEPTION_KEYS = tuple(name for name, _ in kernels.PROPRIO_LAYOUT)
-
-
-class AntObservables(composer.Observables):
-  """Proprioception of one Ant, for use outside `coop_suite` tasks.
-
-  The suite's tasks compute the same features for all agents at once through
-  `proprioception`; these observables call it for a single Ant.
-  """
-
-  def _feature(self, name):
-    return observable.Generic(lambda physics: proprioception(
-        [self._entity], physics, [self._entity.prev_action])[name][0])
-
-  @composer.observable
-  def joints_pos(self):
-    return self._feature("joints_pos")
-
-  @composer.observable
-  def joints_vel(self):
-    return self._feature("joints_vel")
-
-  @composer.observable
-  def torso_height(self):
-    return self._feature("torso_height")
-
-  @composer.observable
-  def gravity(self):
-    return self._feature("gravity")
-
-  @composer.observable
-  def velocity(self):
-    return self._feature("velocity")
-
-  @composer.observable
-  def angular_velocity(self):
-    return self._feature("angular_velocity")
-
-  @composer.observable
-  def prev_action(self):
-    return self._feature("prev_action")

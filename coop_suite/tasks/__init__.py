@@ -16,6 +16,3 @@ TASKS = {
     "walk_to_target": (WalkToTarget, WalkToTargetConfig, 1),
     "walk_velocity": (WalkVelocity, WalkVelocityConfig, 1),
 }
-
-COOPERATIVE_TASKS = ("transport", "corridor", "ravine")
-LOCOMOTION_TASKS = ("walk_to_target", "walk_velocity")
