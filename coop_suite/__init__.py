@@ -139,10 +139,10 @@ def pettingzoo_env(task, n_agents=None, *, flatten=False, render_mode=None,
   """A PettingZoo `ParallelEnv` around `load(task, n_agents, **load_kwargs)`.
 
   `flatten`, `render_mode` and `render_size` go to
-  `coop_suite.wrappers.ParallelEnv`; see docs/pettingzoo.md.
+  `coop_suite.pettingzoo.ParallelEnv`; see docs/pettingzoo.md.
   """
-  from coop_suite import wrappers  # pylint: disable=g-import-not-at-top
-  return wrappers.ParallelEnv(load(task, n_agents, **load_kwargs),
+  from coop_suite import pettingzoo  # pylint: disable=g-import-not-at-top
+  return pettingzoo.ParallelEnv(load(task, n_agents, **load_kwargs),
                               flatten=flatten, render_mode=render_mode,
                               render_size=render_size)
 

@@ -10,7 +10,7 @@
     env = coop_suite.rllib_env("ravine", 2)   # or directly
     observations, infos = env.reset(seed=0)
 
-A thin layer over the PettingZoo adapter (`coop_suite.wrappers.ParallelEnv`),
+A thin layer over the PettingZoo adapter (`coop_suite.pettingzoo.ParallelEnv`),
 so agent ids, spaces, seeding and the split between termination (the task
 ended the episode: no bootstrapping) and truncation (the time limit) are the
 same as there (docs/pettingzoo.md); this adds RLlib's `"__all__"` entries,
@@ -19,7 +19,7 @@ flat float32 vector per agent by default (`flatten=False` for a `Dict`),
 the layout RLlib's default encoders take.
 """
 
-from coop_suite import wrappers
+import coop_suite.pettingzoo
 
 try:
   from ray.rllib.env import multi_agent_env
@@ -51,8 +51,7 @@ class MultiAgentEnv(multi_agent_env.MultiAgentEnv):
                        ("flatten", "render_mode", "render_size")
                        if k in options}
     adapter_options.setdefault("flatten", True)
-    import coop_suite  # pylint: disable=g-import-not-at-top
-    self.parallel_env = wrappers.ParallelEnv(
+    self.parallel_env = coop_suite.pettingzoo.ParallelEnv(
         coop_suite.load(task, n_agents, **options), **adapter_options)
     self.possible_agents = list(self.parallel_env.possible_agents)
     self.agents = []

@@ -12,7 +12,7 @@ import pytest
 import coop_suite
 from coop_suite import kernels
 from coop_suite.entities import ant as ant_lib
-from coop_suite.tasks import observables
+from coop_suite.tasks import exteroception
 
 
 def _states(task, n_agents, steps=30, **options):
@@ -74,9 +74,9 @@ def test_frames_and_proprioception_match_numpy():
 def test_nearest_teammates_match_numpy(n, k):
   rng = np.random.RandomState(n * 10 + k)
   yaw = rng.uniform(-np.pi, np.pi, n)
-  frames = observables.AgentFrames(rng.uniform(-5, 5, (n, 3)), np.cos(yaw),
+  frames = exteroception.AgentFrames(rng.uniform(-5, 5, (n, 3)), np.cos(yaw),
                                    np.sin(yaw))
-  offsets, mask = observables.nearest_teammates(frames, k)
+  offsets, mask = exteroception.nearest_teammates(frames, k)
   xy = frames.position[:, :2]
   delta = xy[None] - xy[:, None]
   dist2 = np.einsum("ijk,ijk->ij", delta, delta)
@@ -97,7 +97,7 @@ def test_heights_match_mujoco_multi_ray(task, options):
   """Bit-identical to one `mujoco.mj_multiRay` per agent over every geom of
   the model, on terrain with a trench and a stone (pushers stand inside the
   trench), a cylinder, walls."""
-  sampler = observables.HeightSampler(3, 0.6)
+  sampler = exteroception.HeightSampler(3, 0.6)
   local_dirs, scale, origin_height, no_hit = sampler.ray_args
   saw_relief = False
   rng = np.random.RandomState(2)
@@ -108,7 +108,7 @@ def test_heights_match_mujoco_multi_ray(task, options):
     points = np.concatenate([real.position, points + rng.uniform(
         -0.8, 0.8, points.shape)])
     yaw = rng.uniform(-np.pi, np.pi, len(points))
-    frames = observables.AgentFrames(points, np.cos(yaw), np.sin(yaw))
+    frames = exteroception.AgentFrames(points, np.cos(yaw), np.sin(yaw))
     got = sampler(env.physics, frames)
     for i in range(len(frames.cos)):
       c, s = frames.cos[i], frames.sin[i]
@@ -132,15 +132,15 @@ def test_heights_refuse_terrain_they_cannot_ray_cast():
       <mujoco><asset><hfield name="h" nrow="3" ncol="3" size="1 1 1 1"/>
       </asset><worldbody><geom name="hills" type="hfield" hfield="h"/>
       </worldbody></mujoco>""")
-  sampler = observables.HeightSampler(3, 0.6)
+  sampler = exteroception.HeightSampler(3, 0.6)
   with pytest.raises(ValueError, match="hills.*HFIELD.*primitive"):
-    observables.terrain_geoms(model, sampler.geom_group)
+    exteroception.terrain_geoms(model, sampler.geom_group)
 
 
 def test_heading_offsets_match_numpy_and_check_shapes():
   rng = np.random.RandomState(3)
   yaw = rng.uniform(-np.pi, np.pi, 4)
-  frames = observables.AgentFrames(rng.uniform(-5, 5, (4, 3)), np.cos(yaw),
+  frames = exteroception.AgentFrames(rng.uniform(-5, 5, (4, 3)), np.cos(yaw),
                                    np.sin(yaw))
   origin, cos, sin = frames.position[:, :2], frames.cos, frames.sin
   point = rng.uniform(-5, 5, 2)

@@ -18,7 +18,7 @@ from pettingzoo.test import parallel_api_test
 from pettingzoo.test import parallel_seed_test
 
 import coop_suite
-from coop_suite import wrappers
+import coop_suite.pettingzoo
 
 _DOC = os.path.join(os.path.dirname(__file__), "..", "docs", "pettingzoo.md")
 
@@ -72,8 +72,8 @@ def test_pettingzoo_parallel_api_test(task, n_agents, options):
 
 
 def test_parallel_api_test_flat_observations():
-  env = wrappers.ParallelEnv(coop_suite.load("transport", 3, time_limit=1.0),
-                             flatten=True)
+  env = coop_suite.pettingzoo.ParallelEnv(
+      coop_suite.load("transport", 3, time_limit=1.0), flatten=True)
   parallel_api_test(env, num_cycles=25)
 
 
@@ -194,7 +194,8 @@ def test_spaces_and_state():
 
 
 def test_flat_layout_is_the_sorted_dict_concatenated():
-  flat = wrappers.ParallelEnv(coop_suite.load("corridor", 2), flatten=True)
+  flat = coop_suite.pettingzoo.ParallelEnv(coop_suite.load("corridor", 2),
+                                           flatten=True)
   nested = coop_suite.pettingzoo_env("corridor", 2)
   flat_obs, _ = flat.reset(seed=3)
   nested_obs, _ = nested.reset(seed=3)
@@ -250,12 +251,13 @@ def test_bad_reset_and_step_before_reset():
   with pytest.raises(ValueError, match="seed"):
     env.reset(seed=-1)
   with pytest.raises(ValueError, match="render_mode"):
-    wrappers.ParallelEnv(env.env, render_mode="human")
+    coop_suite.pettingzoo.ParallelEnv(env.env, render_mode="human")
 
 
 def test_render_rgb_array():
-  env = wrappers.ParallelEnv(coop_suite.load("transport", 2),
-                             render_mode="rgb_array", render_size=(48, 64))
+  env = coop_suite.pettingzoo.ParallelEnv(coop_suite.load("transport", 2),
+                                          render_mode="rgb_array",
+                                          render_size=(48, 64))
   env.reset(seed=0)
   frame = env.render()
   assert frame.shape == (48, 64, 3) and frame.dtype == np.uint8

@@ -32,7 +32,7 @@ import dm_env
 from dm_env import specs
 import numpy as np
 
-from coop_suite.tasks import observables as frames_lib
+from coop_suite.tasks import exteroception
 
 DEFAULT_COMMAND_BOUND = {'position': 3.0, 'velocity': 1.0}
 """Per-axis bound of a command: metres (position) or m/s (velocity)."""
@@ -186,8 +186,8 @@ class CommandWrapper:
     if self._paradigm == 'position':
       command = frames.to_heading_frame(self._world_commands)
     else:
-      command = frames_lib.rotate_to_heading(self._world_commands, frames.cos,
-                                             frames.sin)
+      command = exteroception.rotate_to_heading(self._world_commands,
+                                                frames.cos, frames.sin)
     features = self._env.task.features(self._env.physics, self._input_groups)
     inputs = {k: features[k] for k in self._proprio_keys}
     inputs[self._controller.command_key] = command

@@ -36,7 +36,7 @@ import numpy as np
 from coop_suite.entities import Ant
 from coop_suite.entities import ant as ant_lib
 from coop_suite import kernels
-from coop_suite.tasks import observables as extero
+from coop_suite.tasks import exteroception
 
 SPECIES_COLOURS = {
     "ant": (0.8, 0.6, 0.4, 1.0),
@@ -180,7 +180,7 @@ class CoopTask(composer.Task):
     self._last_actions = np.zeros((self.n_agents, ant_lib.NUM_ACTUATORS))
     for walker, row in zip(self._walkers, self._last_actions):
       walker.share_action_buffer(row)
-    self._heights = extero.HeightSampler(config.height_grid,
+    self._heights = exteroception.HeightSampler(config.height_grid,
                                          config.height_spacing)
     self._checked_groups = set()
     self._plans = {}  # Observation names -> what `observation_batch` builds.
@@ -411,7 +411,7 @@ class CoopTask(composer.Task):
     if self._proprioception is None:
       self._proprioception = ant_lib.ProprioceptionReader(self._walkers)
     state = self._proprioception.state(physics, self._last_actions)
-    value = cache["agent_state"] = (extero.AgentFrames.from_packed(state),
+    value = cache["agent_state"] = (exteroception.AgentFrames.from_packed(state),
                                     state)
     return value
 
@@ -582,7 +582,7 @@ class CoopTask(composer.Task):
     return out
 
   def _shared_exteroception(self, physics, frames):
-    """Features every cooperative task exposes (see `observables.py`), from
+    """Features every cooperative task exposes (see `exteroception.py`), from
     one compiled call: [n, 4 + 3k + heights], `_shared_columns` name them."""
     return kernels.shared_exteroception(
         frames.as_packed(), self._config.k_neighbours,

@@ -21,7 +21,7 @@ import numpy as np
 from coop_suite import arenas
 from coop_suite.tasks import base
 from coop_suite.tasks import layouts
-from coop_suite.tasks import observables
+from coop_suite.tasks import exteroception
 from coop_suite.tasks import rewards
 
 
@@ -194,7 +194,7 @@ class WalkVelocity(_Locomotion):
     self._command_time = physics.data.time
 
   def _commands(self, physics, frames):
-    return {"velocity": observables.rotate_to_heading(
+    return {"velocity": exteroception.rotate_to_heading(
         self._command[None], frames.cos, frames.sin)}
 
   def _update_status(self, physics):

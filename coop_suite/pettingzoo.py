@@ -43,7 +43,7 @@ try:
   import pettingzoo
 except ImportError as e:  # pragma: no cover - depends on the install.
   raise ImportError(
-      "coop_suite.wrappers needs the optional PettingZoo extra: "
+      "coop_suite.pettingzoo needs the optional PettingZoo extra: "
       "pip install -e .[pettingzoo]") from e
 
 __all__ = ["ParallelEnv", "agent_ids"]

@@ -1,5 +1,9 @@
 """Exteroception shared by every task: what the upper layer sees.
 
+`AgentFrames` (where each agent is and which way it faces),
+`rotate_to_heading`, `nearest_teammates` and `HeightSampler` (ray-cast
+terrain heights); the tasks' observables are built in `base.py`.
+
 Features are computed for all agents at once (arrays with a leading agent
 axis [n, ...]) because composer's per-observable overhead, paid once per
 agent and feature, would otherwise cost more than the physics itself; the
