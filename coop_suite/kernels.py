@@ -72,10 +72,24 @@ _mju_ray_geom = _declare_ray_geom()
 
 
 @numba.njit(cache=True)
+def rotate(cos, sin, x, y):
+  """The planar vector (x, y) turned by the angle of cosine `cos` and sine
+  `sin`: (cos x - sin y, sin x + cos y).
+
+  The suite's one 2-D rotation: a heading-frame vector into the world frame
+  with an agent's (cos, sin) of its yaw, a world offset into the heading
+  frame with (cos, -sin) (`to_heading`). Compiled for the kernels;
+  `rotate.py_func` is the same formula for numpy arrays (broadcast).
+  """
+  return cos * x - sin * y, sin * x + cos * y
+
+
+@numba.njit(cache=True)
 def to_heading(cos, sin, dx, dy):
-  """A world-frame offset (dx, dy) seen in a heading frame (rotated by -yaw):
-  (cos dx + sin dy, cos dy - sin dx)."""
-  return cos * dx + sin * dy, cos * dy - sin * dx
+  """A world-frame offset (dx, dy) seen in the heading frame of yaw (cos,
+  sin): `rotate` by -yaw, (cos dx + sin dy, cos dy - sin dx) bit for bit
+  (negation is exact)."""
+  return rotate(cos, -sin, dx, dy)
 
 
 @numba.njit(cache=True)
@@ -249,7 +263,7 @@ def terrain_heights(geom_xpos, geom_xmat, geom_size, geom_type, candidates,
   """Writes ray-cast terrain heights into out[:, column:column + m].
 
   Per agent m rays from (x, y, origin_height) along the `local_dirs` ([m, 3],
-  heading frame) rotated by its yaw: (c lx - s ly, s lx + c ly, lz), each
+  heading frame) turned by its yaw (`rotate`; lz unchanged), each
   against the `candidates` geoms (`nearest_hit`). Height = origin_height -
   dist / scale, `no_hit` where nothing is hit (dist < 0), never below
   `no_hit`.
@@ -261,9 +275,8 @@ def terrain_heights(geom_xpos, geom_xmat, geom_size, geom_type, candidates,
     cos, sin = frames[i, 3], frames[i, 4]
     origin[0], origin[1], origin[2] = frames[i, 0], frames[i, 1], origin_height
     for r in range(m):
-      lx, ly = local_dirs[r, 0], local_dirs[r, 1]
-      direction[0] = cos * lx - sin * ly
-      direction[1] = sin * lx + cos * ly
+      direction[0], direction[1] = rotate(cos, sin, local_dirs[r, 0],
+                                          local_dirs[r, 1])
       direction[2] = local_dirs[r, 2]
       dist = nearest_hit(geom_xpos, geom_xmat, geom_size, geom_type,
                          candidates, origin, direction)

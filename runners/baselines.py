@@ -191,16 +191,17 @@ def _own_world(obs, key):
   """An agent's own heading-frame offset `obs[key]` [2] in the world frame,
   through its own `extero/self_pose` (x, y, cos, sin): still only what the
   upper layer reads."""
+  from coop_suite import kernels  # pylint: disable=g-import-not-at-top
   x, y, cos, sin = obs['extero/self_pose']
-  dx, dy = obs[key][:2]
-  return np.array([x + cos * dx - sin * dy, y + sin * dx + cos * dy])
+  dx, dy = kernels.rotate(cos, sin, *obs[key][:2])
+  return np.array([x + dx, y + dy])
 
 
 def _to_own_heading(obs, world):
   """World point `world` [2] -> the agent's heading-frame offset."""
+  from coop_suite import kernels  # pylint: disable=g-import-not-at-top
   x, y, cos, sin = obs['extero/self_pose']
-  dx, dy = world[0] - x, world[1] - y
-  return np.array([cos * dx + sin * dy, -sin * dx + cos * dy])
+  return np.array(kernels.to_heading(cos, sin, world[0] - x, world[1] - y))
 
 
 class CorridorGreedy:
@@ -230,8 +231,9 @@ class CorridorGreedy:
 class CorridorOracle:
   """World state and memory: one agent at a time, the one in the middle of
   the start arc first, then outwards. The others hold their start places,
-  except the next in line, which waits 2 m before the slit's mouth; it goes
-  in when the one before has passed the slit's exit. Agents through the
+  except the next in line, which waits 2 m before the slit's mouth once the
+  one before has passed that point; it goes in when the one before has
+  passed the slit's exit. Agents through the
   slit walk on to spread out beyond the finish line."""
 
   STAGING = 2.0
@@ -262,6 +264,11 @@ class CorridorOracle:
       self._turn += 1
     mouth = self._entrance - 0.6 * axis
     goals = self._starts.copy()  # Hold the start place by default.
+    # The next in line stages only once the one whose turn it is has passed
+    # the staging point: staged earlier, it stands in that one's way.
+    ahead_of_staging = self._turn >= n or (
+        (agents[self._queue[self._turn]] - self._entrance) @ axis
+        > -self.STAGING + 0.8)
     for rank, agent in enumerate(self._queue):
       if through[agent]:
         lateral = (rank - (n - 1) / 2) * 1.8
@@ -270,7 +277,7 @@ class CorridorOracle:
         close = np.linalg.norm(agents[agent] - mouth) < 0.6 or (
             (agents[agent] - self._entrance) @ axis > -0.3)
         goals[agent] = self._exit + 2.0 * axis if close else mouth
-      elif rank == self._turn + 1:
+      elif rank == self._turn + 1 and ahead_of_staging:
         goals[agent] = self._entrance - self.STAGING * axis
     return clip_norm(frames.to_heading_frame(goals), 3.0)
 

@@ -6,6 +6,7 @@ line pays every agent a bonus; success when all have crossed.
 """
 
 import dataclasses
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -54,7 +55,7 @@ class Corridor(base.CoopTask):
                       float(config.agent_target_scale))
 
   def _exteroception(self, physics, frames):
-    offsets = self._measure(physics)[2]
+    offsets = self._measure(physics).offsets
     return {
         "slit": offsets[:, :5],
         "target": offsets[:, 5:],
@@ -79,7 +80,8 @@ class Corridor(base.CoopTask):
       layouts.place(walker, physics, xy, yaw, random_state)
 
   def _update_status(self, physics):
-    newly = self._measure(physics)[0] > self._crossed  # Past, not crossed.
+    # Past the line, not crossed before.
+    newly = self._measure(physics).past_finish > self._crossed
     self._new_crossings = int(np.count_nonzero(newly))
     self._crossed |= newly
     self._success = bool(self._crossed.all())
@@ -88,7 +90,7 @@ class Corridor(base.CoopTask):
     return {
         "crossing": np.full(self.n_agents,
                             self._config.crossing_bonus * self._new_crossings),
-        "agent_target": self._measure(physics)[1],
+        "agent_target": self._measure(physics).agent_target,
     }
 
   def _progress(self, physics):
@@ -101,6 +103,18 @@ class Corridor(base.CoopTask):
   def tracked_positions(self, physics):
     slit = np.append(self._arena.slit_exit, 0.0)
     return np.vstack([super().tracked_positions(physics), slit])
+
+
+class Measurement(NamedTuple):
+  """What the corridor reads from one state (`measure`)."""
+
+  past_finish: np.ndarray
+  """[n] whether each agent's torso is past the finish line."""
+  agent_target: np.ndarray
+  """[n] `rewards.inverse_distance` of d(agent, target)."""
+  offsets: np.ndarray
+  """[n, 7] the slit's entrance and exit in each agent's heading frame, the
+  slit's width, the target in the heading frame (m)."""
 
 
 @numba.njit(cache=True)
@@ -117,10 +131,7 @@ def measure(frames, finish_x, entrance, exit_, slit_width, target,
     target: [2] the point of the finish line in front of the slit (m).
     target_scale: coefficient of 1 / (1 + d(agent, target)).
   Returns:
-    past_finish: [n] whether each agent's torso is past the finish line.
-    agent_target: [n] `rewards.inverse_distance` of d(agent, target).
-    offsets: [n, 7] the slit's entrance and exit in each agent's heading
-      frame, the slit's width, the target in the heading frame (m).
+    A `Measurement`.
   """
   n = frames.shape[0]
   past_finish = np.empty(n, dtype=np.bool_)
@@ -139,4 +150,4 @@ def measure(frames, finish_x, entrance, exit_, slit_width, target,
     offsets[i, 4] = slit_width
     offsets[i, 5], offsets[i, 6] = kernels.to_heading(cos, sin, tx - x,
                                                       ty - y)
-  return past_finish, agent_target, offsets
+  return Measurement(past_finish, agent_target, offsets)

@@ -111,12 +111,11 @@ class AgentFrames:
 
 
 def rotate_to_heading(delta, cos, sin):
-  """Rotates world-frame offsets [..., 2] by -yaw (cos, sin broadcast)."""
-  dx, dy = delta[..., 0], delta[..., 1]
-  out = np.empty(np.broadcast(dx, cos).shape + (2,))
-  out[..., 0] = cos * dx + sin * dy
-  out[..., 1] = cos * dy - sin * dx
-  return out
+  """World-frame offsets [..., 2] in the heading frame of yaw (cos, sin),
+  broadcast: `kernels.rotate` by -yaw, on numpy arrays."""
+  x, y = kernels.rotate.py_func(cos, -np.asarray(sin), delta[..., 0],
+                                delta[..., 1])
+  return np.stack([x, y], -1)
 
 
 def nearest_teammates(frames, k):

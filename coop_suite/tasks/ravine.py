@@ -19,6 +19,7 @@ nor crossed yet.
 """
 
 import dataclasses
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -131,7 +132,7 @@ class Ravine(base.CoopTask):
   # --- Hooks -------------------------------------------------------------------
 
   def _exteroception(self, physics, frames):
-    offsets = self._measure(physics)[3]
+    offsets = self._measure(physics).offsets
     return {
         "stone": offsets[:, 0:2],
         "ravine": offsets[:, 2:8],
@@ -188,7 +189,7 @@ class Ravine(base.CoopTask):
       self._failure = bool(fallen.all())
 
   def _reward_terms(self, physics):
-    shaping = self._measure(physics)[2]
+    shaping = self._measure(physics).shaping
     terms = {}
     if self.stage in ("pushers", "joint"):
       terms["bridge"] = shaping[0]
@@ -202,7 +203,7 @@ class Ravine(base.CoopTask):
     return terms
 
   def _progress(self, physics):
-    bridge_error = self._measure(physics)[1]
+    bridge_error = self._measure(physics).bridge_error
     out = {"bridge_error": float(bridge_error),
            "stone_in_place": bool(bridge_error < self._config.bridge_tolerance),
            "fallen": int(np.sum(self._fallen)),
@@ -213,7 +214,7 @@ class Ravine(base.CoopTask):
 
   def _task_state(self, physics):
     return np.concatenate([self.stone.position(physics)[:2],
-                           self._measure(physics)[0]])
+                           self._measure(physics).nearest])
 
   def tracked_positions(self, physics):
     return np.vstack([super().tracked_positions(physics),
@@ -250,6 +251,22 @@ def update_falls(frames, is_crosser, fallen, crossed, finish_x, fallen_height,
   return fall
 
 
+class Measurement(NamedTuple):
+  """What the ravine reads from one state (`measure`)."""
+
+  nearest: np.ndarray
+  """[2] world xy of the crosser the pushers serve."""
+  bridge_error: float
+  """|stone_y - nearest_y| (m)."""
+  shaping: np.ndarray
+  """[2, n] bridge (pushers; 0 for crossers) and destination (crossers; 0
+  for pushers) terms."""
+  offsets: np.ndarray
+  """[n, 12] in each agent's heading frame: the stone; the near and far
+  edges level with the agent, width, depth; the finish line level with the
+  agent; the nearest crosser (m)."""
+
+
 @numba.njit(cache=True)
 def measure(frames, is_crosser, done, markers, use_markers, xpos, stone,
             near_edge_x, far_edge_x, finish_x, width, depth, bridge_scale,
@@ -272,13 +289,7 @@ def measure(frames, is_crosser, done, markers, use_markers, xpos, stone,
     bridge_scale, destination_scale: coefficients of 1 / (1 + d) for the
       pushers' bridge error and the crossers' distance to the finish line.
   Returns:
-    nearest: [2] world xy of the crosser the pushers serve.
-    bridge_error: |stone_y - nearest_y| (m).
-    shaping: [2, n] bridge (pushers; 0 for crossers) and destination
-      (crossers; 0 for pushers) terms.
-    offsets: [n, 12] in each agent's heading frame: the stone; the near and
-      far edges level with the agent, width, depth; the finish line level
-      with the agent; the nearest crosser (m).
+    A `Measurement`.
   """
   n = frames.shape[0]
   best, best_gap = -1, 0.0
@@ -322,4 +333,4 @@ def measure(frames, is_crosser, done, markers, use_markers, xpos, stone,
                                                       0.0)
     offsets[i, 10], offsets[i, 11] = kernels.to_heading(
         cos, sin, nearest[0] - x, nearest[1] - y)
-  return nearest, bridge_error, shaping, offsets
+  return Measurement(nearest, bridge_error, shaping, offsets)

@@ -9,6 +9,7 @@ is cooperative (docs/tasks.md, docs/baselines.md).
 """
 
 import dataclasses
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -74,7 +75,7 @@ class Transport(base.CoopTask):
                     float(config.agent_target_scale))
 
   def _exteroception(self, physics, frames):
-    offsets = self._measure(physics)[3]
+    offsets = self._measure(physics).offsets
     return {"cylinder": offsets[:, :2], "target": offsets[:, 2:]}
 
   def _initialize_layout(self, physics, random_state):
@@ -103,10 +104,10 @@ class Transport(base.CoopTask):
     return self.per_state("measure", physics, compute)
 
   def _update_status(self, physics):
-    cylinder_target, cylinder_speed, _, _ = self._measure(physics)
-    inside = cylinder_target < self._config.target_radius
+    measured = self._measure(physics)
+    inside = measured.cylinder_target < self._config.target_radius
     self._reached |= inside
-    if inside and cylinder_speed < self._config.rest_speed:
+    if inside and measured.cylinder_speed < self._config.rest_speed:
       self._held += self.control_timestep
     else:
       self._held = 0.0
@@ -115,7 +116,7 @@ class Transport(base.CoopTask):
       self._success = True
 
   def _reward_terms(self, physics):
-    shaping = self._measure(physics)[2]
+    shaping = self._measure(physics).shaping
     bonus = self._config.success_bonus if self._success_event else 0.0
     return {
         "cylinder_target": shaping[0],
@@ -125,7 +126,8 @@ class Transport(base.CoopTask):
     }
 
   def _progress(self, physics):
-    return {"cylinder_target_distance": float(self._measure(physics)[0]),
+    return {"cylinder_target_distance": float(
+                self._measure(physics).cylinder_target),
             "reached": bool(self._reached)}
 
   def _task_state(self, physics):
@@ -136,6 +138,21 @@ class Transport(base.CoopTask):
     target = np.append(self._arena.target_position, 0.0)
     return np.vstack([super().tracked_positions(physics),
                       self.cylinder.position(physics), target])
+
+
+class Measurement(NamedTuple):
+  """What transport reads from one state (`measure`)."""
+
+  cylinder_target: float
+  """d(cylinder, target), planar (m)."""
+  cylinder_speed: float
+  """The cylinder's planar speed (m/s)."""
+  shaping: np.ndarray
+  """[3, n] `rewards.inverse_distance` of d(cylinder, target),
+  d(agent, cylinder) and d(agent, target)."""
+  offsets: np.ndarray
+  """[n, 4] the cylinder's and the target's offsets in each agent's heading
+  frame (m)."""
 
 
 @numba.njit(cache=True)
@@ -153,11 +170,7 @@ def measure(frames, xpos, cvel, cylinder, target, scales):
     scales: coefficients of 1 / (1 + d) for d(cylinder, target),
       d(agent, cylinder) and d(agent, target).
   Returns:
-    cylinder_target: d(cylinder, target), planar (m).
-    cylinder_speed: the cylinder's planar speed (m/s).
-    shaping: [3, n] `rewards.inverse_distance` of the three distances.
-    offsets: [n, 4] the cylinder's and the target's offsets in each agent's
-      heading frame (m).
+    A `Measurement`.
   """
   n = frames.shape[0]
   cx, cy = xpos[cylinder, 0], xpos[cylinder, 1]
@@ -177,4 +190,4 @@ def measure(frames, xpos, cvel, cylinder, target, scales):
         scales[2], rewards.planar_norm(x - tx, y - ty))
     offsets[i, 0], offsets[i, 1] = kernels.to_heading(cos, sin, cx - x, cy - y)
     offsets[i, 2], offsets[i, 3] = kernels.to_heading(cos, sin, tx - x, ty - y)
-  return cylinder_target, cylinder_speed, shaping, offsets
+  return Measurement(cylinder_target, cylinder_speed, shaping, offsets)
