@@ -52,7 +52,7 @@ def main():
   updater = env._observation_updater
   updater.get_observation = _timed(updater.get_observation, totals,
                                    "observation")
-  runner = env._substeps
+  runner = env._stepper.substeps if env._stepper is not None else None
   if runner is not None:
     runner.step = _timed(runner.step, totals, "physics substeps")
   # pylint: enable=protected-access

@@ -70,7 +70,8 @@ def agent_range(task):
   return cls.MIN_AGENTS, cls.MAX_AGENTS
 
 
-def load(task, n_agents=None, *, seed=None, time_limit=None, **kwargs):
+def load(task, n_agents=None, *, seed=None, time_limit=None, fast_path=True,
+         **kwargs):
   """Builds a multi-agent environment.
 
   Args:
@@ -82,6 +83,8 @@ def load(task, n_agents=None, *, seed=None, time_limit=None, **kwargs):
     seed: integer seed for the environment's random state; the same seed
       gives the same episodes.
     time_limit: episode length in seconds; defaults to the task's config.
+    fast_path: False steps through plain composer (`coop_suite.fast`): the
+      same numbers, several times slower; for checking the fast path.
     **kwargs: task options: any field of the task's config dataclass (e.g.
       `target_radius=1.5`), plus task arguments such as `stage` and
       `n_pushers` for the ravine.
@@ -127,10 +130,12 @@ def load(task, n_agents=None, *, seed=None, time_limit=None, **kwargs):
   config = config_cls(**config_kwargs)
   task_instance = cls(n_agents, config=config, **task_kwargs)
   env = CoopEnvironment(task_instance, time_limit=config.time_limit,
-                        random_state=np.random.RandomState(seed))
+                        random_state=np.random.RandomState(seed),
+                        fast_path=fast_path)
   # What pickling and copying rebuild the environment from.
   env.load_arguments = ((task, n_agents),
-                        dict(seed=seed, time_limit=time_limit, **kwargs))
+                        dict(seed=seed, time_limit=time_limit,
+                             fast_path=fast_path, **kwargs))
   return env
 
 

@@ -19,14 +19,12 @@ after later steps. Compiled once per machine and cached on disk
 (`cache=True`); the first import in a fresh checkout takes a few seconds.
 """
 
-import glob
 import math
-import os
 
-from llvmlite import binding as llvm
-import mujoco
 import numba
 import numpy as np
+
+from coop_suite.fast import raycast
 
 # Column layout of the proprioception (`agent_state`'s columns 5 onwards).
 PROPRIO_LAYOUT = (("joints_pos", 8), ("joints_vel", 8), ("torso_height", 1),
@@ -43,32 +41,6 @@ def proprio_columns(offset=0, prefix=""):
     columns.append((prefix + name, slice(start, start + size)))
     start += size
   return tuple(columns)
-
-
-def _declare_ray_geom():
-  """MuJoCo's `mju_rayGeom` (one ray against one primitive geom), callable
-  from the kernels.
-
-  The mujoco package ships its shared library beside its bindings; loading
-  it into LLVM's symbol table lets compiled code call it by name, which (unlike
-  a ctypes pointer) survives numba's on-disk cache. Pointers are passed as
-  integers, which the C ABI passes like pointers. The last argument (an
-  optional surface normal, NULL here) is absent in older MuJoCo versions,
-  where the C calling convention ignores it.
-  """
-  folder = os.path.dirname(mujoco.__file__)
-  paths = sorted(glob.glob(os.path.join(folder, "libmujoco.so*"))
-                 + glob.glob(os.path.join(folder, "libmujoco*.dylib"))
-                 + glob.glob(os.path.join(folder, "mujoco.dll")))
-  if not paths:
-    raise ImportError(f"MuJoCo's shared library was not found in {folder}.")
-  llvm.load_library_permanently(paths[0])
-  ptr = numba.types.intp
-  return numba.types.ExternalFunction("mju_rayGeom", numba.types.float64(
-      ptr, ptr, ptr, ptr, ptr, numba.types.int32, ptr))
-
-
-_mju_ray_geom = _declare_ray_geom()
 
 
 @numba.njit(cache=True)
@@ -239,21 +211,15 @@ def nearest_teammates(frames, k, out, column):
       dist2[best] = -1.0  # Taken.
 
 
-@numba.njit(cache=True)
-def nearest_hit(geom_xpos, geom_xmat, geom_size, geom_type, candidates,
-                origin, direction):
-  """Distance along one ray to the nearest of the `candidates` geoms, -1 if
-  it meets none: what `mj_ray` returns with those geoms left after its
-  filters (the same `mju_rayGeom` per geom, the same minimum)."""
-  nearest = -1.0
-  for g in candidates:
-    dist = _mju_ray_geom(geom_xpos.ctypes.data + 24 * g,
-                         geom_xmat.ctypes.data + 72 * g,
-                         geom_size.ctypes.data + 24 * g, origin.ctypes.data,
-                         direction.ctypes.data, geom_type[g], 0)
-    if dist >= 0 and (dist < nearest or nearest < 0):
-      nearest = dist
-  return nearest
+@numba.vectorize(["float64(float64, float64, float64, float64)"], cache=True)
+def ray_height(dist, scale, origin_height, no_hit):
+  """The height (world z, m) a downward ray from `origin_height` met after
+  `dist` (`scale` = its length per metre of drop): origin_height - dist /
+  scale, never below `no_hit`, which is also the answer where it met nothing
+  (dist < 0). A numpy ufunc, and a scalar function inside kernels."""
+  if dist < 0:
+    return no_hit
+  return max(origin_height - dist / scale, no_hit)
 
 
 @numba.njit(cache=True)
@@ -264,9 +230,8 @@ def terrain_heights(geom_xpos, geom_xmat, geom_size, geom_type, candidates,
 
   Per agent m rays from (x, y, origin_height) along the `local_dirs` ([m, 3],
   heading frame) turned by its yaw (`rotate`; lz unchanged), each
-  against the `candidates` geoms (`nearest_hit`). Height = origin_height -
-  dist / scale, `no_hit` where nothing is hit (dist < 0), never below
-  `no_hit`.
+  against the `candidates` geoms (`raycast.nearest_hit`), the distance
+  turned into a height by `ray_height`.
   """
   n, m = frames.shape[0], local_dirs.shape[0]
   origin = np.empty(3)
@@ -278,12 +243,9 @@ def terrain_heights(geom_xpos, geom_xmat, geom_size, geom_type, candidates,
       direction[0], direction[1] = rotate(cos, sin, local_dirs[r, 0],
                                           local_dirs[r, 1])
       direction[2] = local_dirs[r, 2]
-      dist = nearest_hit(geom_xpos, geom_xmat, geom_size, geom_type,
-                         candidates, origin, direction)
-      if dist < 0:
-        out[i, column + r] = no_hit
-      else:
-        out[i, column + r] = max(origin_height - dist / scale[r], no_hit)
+      dist = raycast.nearest_hit(geom_xpos, geom_xmat, geom_size, geom_type,
+                                 candidates, origin, direction)
+      out[i, column + r] = ray_height(dist, scale[r], origin_height, no_hit)
 
 
 @numba.njit(cache=True)

@@ -12,6 +12,7 @@ import pytest
 import coop_suite
 from coop_suite import kernels
 from coop_suite.entities import ant as ant_lib
+from coop_suite.fast import raycast
 from coop_suite.tasks import exteroception
 
 
@@ -134,7 +135,7 @@ def test_heights_refuse_terrain_they_cannot_ray_cast():
       </worldbody></mujoco>""")
   sampler = exteroception.HeightSampler(3, 0.6)
   with pytest.raises(ValueError, match="hills.*HFIELD.*primitive"):
-    exteroception.terrain_geoms(model, sampler.geom_group)
+    raycast.terrain_geoms(model, sampler.geom_group)
 
 
 def test_heading_offsets_match_numpy_and_check_shapes():

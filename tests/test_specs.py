@@ -213,7 +213,7 @@ def test_disabled_and_buffered_observables_keep_composer_semantics():
   for agent in env.task.observables:
     agent["proprio/joints_pos"].buffer_size = 2
   observations = _episode_observations(env)
-  assert not env._observation_updater._lean  # pylint: disable=protected-access
+  assert not env._observation_updater.lean  # pylint: disable=protected-access
   for got, expected in zip(observations[1:], reference[1:]):
     for agent_got, agent_expected in zip(got, expected):
       assert agent_got["proprio/joints_pos"].shape == (2, 8)

@@ -21,9 +21,15 @@ that only overrides the hooks below:
 
 The three cooperative tasks compute what these hooks need from one state
 (distances, heading-frame offsets, shaping terms) in one compiled `measure`
-kernel each, cached per state with `per_state`; the hooks only pick from its
-outputs. That is a speed choice (see `kernels.py`), not a requirement: a new
-task can write its hooks in numpy first.
+kernel each, computed once per state with `per_state`; the hooks only pick
+from its named outputs. That is a speed choice (see `kernels.py`), not a
+requirement: a new task can write its hooks in numpy first.
+
+Everything computed from one physics state (frames, features, `measure`)
+goes through `per_state`; `state_changed()` forgets it after a hand edit
+of the physics. With `fast_path` off (`coop_suite.load(...,
+fast_path=False)`) nothing is kept and the heights come from MuJoCo's own
+ray casts (see `coop_suite.fast`).
 """
 
 import dataclasses
@@ -35,6 +41,7 @@ import numpy as np
 
 from coop_suite.entities import Ant
 from coop_suite.entities import ant as ant_lib
+from coop_suite import fast
 from coop_suite import kernels
 from coop_suite.tasks import exteroception
 
@@ -193,10 +200,8 @@ class CoopTask(composer.Task):
         ("extero/heights", slice(4 + 3 * k, 4 + 3 * k + m)))
     self._proprioception = None  # See `after_compile`.
     self._joint_ranges = None
-    self._state_key = None
     self._mjdata = None  # The compiled physics' mjData (`after_compile`).
-    self._state_cache = {}
-    self._state_version = 0
+    self._cache = fast.StateCache()
     self._reset_bookkeeping()
     self._agent_observables = [
         self._build_agent_observables(i) for i in range(self.n_agents)]
@@ -231,6 +236,16 @@ class CoopTask(composer.Task):
   @property
   def observables(self):
     return self._agent_observables
+
+  @property
+  def fast_path(self):
+    """Whether per-state values are kept and heights ray-cast from compiled
+    code (`coop_suite.fast`); set by `CoopEnvironment` before compilation."""
+    return self._cache.enabled
+
+  @fast_path.setter
+  def fast_path(self, enabled):
+    self._cache.enabled = bool(enabled)
 
   def episode_metrics(self, physics):
     """Figures of the episode so far.
@@ -291,6 +306,7 @@ class CoopTask(composer.Task):
   def after_compile(self, physics, random_state):
     del random_state  # Unused.
     self._mjdata = physics.data.ptr
+    self._cache.bind(self._mjdata)
     # Runs before the entities' own after_compile, so bind here.
     self._torso_ids = np.array(physics.bind(
         [w.root_body for w in self._walkers]).element_id)
@@ -316,7 +332,7 @@ class CoopTask(composer.Task):
     `Ant.apply_action` does per walker; walkers' `prev_action` are rows of
     `_last_actions`), into the bound mjData (`physics`' own)."""
     del physics, random_state  # `self._mjdata` is physics' data.
-    self._state_version += 1
+    self.state_changed()
     self._last_actions[:] = action
     self._mjdata.ctrl[self._actuator_ids] = self._last_actions.ravel()
 
@@ -396,24 +412,19 @@ class CoopTask(composer.Task):
   def frames(self, physics):
     """Every agent's torso position and heading (`AgentFrames`), computed
     once per physics state."""
-    return self._agent_state(physics)[0]
+    return self.per_state("frames", lambda: exteroception.AgentFrames
+                          .from_packed(self._agent_state(physics)))
 
   def _agent_state(self, physics):
-    """(`AgentFrames`, packed [n, 5 + proprioception]) of this physics
-    state: both from one compiled call (`ProprioceptionReader.state`), since
+    """Every agent's frame and proprioception, packed [n, 5 +
+    proprioception], from one compiled call (`ProprioceptionReader.state`):
     every step reads the frames (status, rewards) and, to act, the
     proprioception."""
-    cache = self._per_state_cache(physics)
-    try:
-      return cache["agent_state"]
-    except KeyError:
-      pass
-    if self._proprioception is None:
-      self._proprioception = ant_lib.ProprioceptionReader(self._walkers)
-    state = self._proprioception.state(physics, self._last_actions)
-    value = cache["agent_state"] = (exteroception.AgentFrames.from_packed(state),
-                                    state)
-    return value
+    def compute():
+      if self._proprioception is None:
+        self._proprioception = ant_lib.ProprioceptionReader(self._walkers)
+      return self._proprioception.state(physics, self._last_actions)
+    return self.per_state("agent_state", compute)
 
   def features(self, physics, groups=FEATURE_GROUPS):
     """Observations of every agent: 'group/name' -> [n_agents, dim].
@@ -443,13 +454,11 @@ class CoopTask(composer.Task):
     each (the proprioception, the shared exteroception), a task's feature
     dict one block per feature.
     """
-    cache = self._per_state_cache(physics)
-    try:
-      return cache[group]
-    except KeyError:
-      pass
+    return self.per_state(group, lambda: self._compute_blocks(group, physics))
+
+  def _compute_blocks(self, group, physics):
     if group == "proprio":
-      blocks = ((self._agent_state(physics)[1], _PROPRIO_COLUMNS),)
+      blocks = ((self._agent_state(physics), _PROPRIO_COLUMNS),)
     elif group == "extero":
       frames = self.frames(physics)
       blocks = _as_blocks("extero/", self._exteroception(physics, frames))
@@ -464,7 +473,6 @@ class CoopTask(composer.Task):
                        f"{FEATURE_GROUPS}.")
     if group not in self._checked_groups:
       self._check_group(group, blocks)
-    cache[group] = blocks
     return blocks
 
   def _agent_feature(self, physics, name, index):
@@ -501,37 +509,19 @@ class CoopTask(composer.Task):
 
   # --- Hooks for subclasses ---------------------------------------------------
 
-  def per_state(self, name, physics, fn):
-    """`fn()` computed once per physics state (e.g. distances that both the
-    status update and the reward need)."""
-    cache = self._per_state_cache(physics)
-    try:
-      return cache[name]
-    except KeyError:
-      value = cache[name] = fn()
-      return value
+  def per_state(self, name, compute):
+    """`compute()` once per physics state, under `name` (e.g. distances that
+    both the status update and the reward need). The state is the
+    environment's own physics; it changes at each step and reset, when the
+    time moves on outside `step`, and at `state_changed()`."""
+    return self._cache.get(name, compute)
 
   def state_changed(self):
-    """Forgets the values cached for the current state (frames, features,
+    """Forgets the values computed for the current state (frames, features,
     `per_state`). Call it after editing the physics by hand outside `step`,
-    e.g. placing a walker or a prop in a test: the cache is keyed on steps,
-    resets and the simulation time, which such an edit does not change."""
-    self._state_version += 1
-
-  def _per_state_cache(self, physics):
-    """A dict for values of the current physics state, emptied when the
-    state changes (a step, a reset, or time moving on outside `step`).
-
-    The state is the environment's own physics (`after_compile` binds its
-    mjData), which every hook and observable is given; reading the time from
-    it directly saves dm_control's wrappers several times per step.
-    """
-    del physics  # The bound mjData is the same.
-    key = (self._state_version, self._mjdata.time)
-    if key != self._state_key:
-      self._state_key = key
-      self._state_cache = {}
-    return self._state_cache
+    e.g. placing a walker or a prop in a test: such an edit changes neither
+    the step nor the simulation time the values are kept by."""
+    self._cache.invalidate()
 
   def _exteroception(self, physics, frames):
     """The task's `extero/*` features named in `EXTERO_FEATURES`."""
@@ -566,7 +556,7 @@ class CoopTask(composer.Task):
     self._return = np.zeros(self.n_agents)
     self._term_names = ()
     self._term_sums = None  # [terms, n_agents], from the first reward on.
-    self._state_version += 1
+    self.state_changed()
 
   def _build_agent_observables(self, index):
     """One agent's observable dict, keys grouped by prefix."""
@@ -583,10 +573,19 @@ class CoopTask(composer.Task):
 
   def _shared_exteroception(self, physics, frames):
     """Features every cooperative task exposes (see `exteroception.py`), from
-    one compiled call: [n, 4 + 3k + heights], `_shared_columns` name them."""
-    return kernels.shared_exteroception(
-        frames.as_packed(), self._config.k_neighbours,
-        *self._heights.geom_args(physics), *self._heights.ray_args)
+    one compiled call: [n, 4 + 3k + heights], `_shared_columns` name them.
+    Without the fast path the call sees no terrain and MuJoCo's own ray
+    casts fill the heights."""
+    geom_args = self._heights.geom_args(physics)
+    if not self.fast_path:
+      geom_args = geom_args[:-1] + (_NO_GEOMS,)
+    out = kernels.shared_exteroception(
+        frames.as_packed(), self._config.k_neighbours, *geom_args,
+        *self._heights.ray_args)
+    if not self.fast_path:
+      out[:, self._shared_columns[-1][1]] = self._heights.multi_ray(
+          physics, frames)
+    return out
 
 
 SHARED_EXTERO_FEATURES = ("self_pose", "teammates", "teammates_mask",
@@ -594,6 +593,8 @@ SHARED_EXTERO_FEATURES = ("self_pose", "teammates", "teammates_mask",
 
 # Discounts: immutable float32 scalars (shape (), as the spec says).
 _ZERO, _ONE = np.float32(0.0), np.float32(1.0)
+
+_NO_GEOMS = np.zeros(0, np.int64)
 
 # The proprioception's columns in `CoopTask._agent_state`'s packed array
 # (after the five frame columns).

@@ -64,7 +64,7 @@ class Corridor(base.CoopTask):
 
   def _measure(self, physics):
     """`measure` of this physics state (computed once per state)."""
-    return self.per_state("measure", physics, lambda: measure(
+    return self.per_state("measure", lambda: measure(
         self.frames(physics).packed, *self._geometry))
 
   def _initialize_layout(self, physics, random_state):

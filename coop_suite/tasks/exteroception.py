@@ -19,6 +19,7 @@ import numpy as np
 
 from coop_suite.arenas import TERRAIN_GROUP
 from coop_suite import kernels
+from coop_suite.fast import raycast
 
 # Height-sample rays start this far above the agent's torso (metres). The
 # rays fan out from one point per agent, so a high origin keeps them close to
@@ -138,10 +139,9 @@ class HeightSampler:
   Each value is the world z (m) of the first terrain or prop surface a ray
   meets on its way down; Ants are invisible to the rays (geom group 1).
 
-  The rays are cast against the terrain geoms only, found once per model
-  with `mj_ray`'s own filters (`terrain_geoms`): the same distances as
-  `mj_multiRay` (bit for bit, `tests/test_kernels.py`) without its pass over
-  every geom of every Ant, which cost more than all other features together.
+  Calling it casts the rays from compiled code against the terrain geoms
+  only (`coop_suite.fast.raycast`); `multi_ray` casts them with MuJoCo's
+  own `mj_multiRay`, the plain path: the same heights, bit for bit.
   """
 
   def __init__(self, grid, spacing):
@@ -176,13 +176,14 @@ class HeightSampler:
 
   def geom_args(self, physics):
     """The geoms' arguments of `kernels.terrain_heights`: MuJoCo's geom
-    arrays of `physics` and the terrain geoms' ids (`terrain_geoms`)."""
+    arrays of `physics` and the terrain geoms' ids
+    (`raycast.terrain_geoms`)."""
     data = physics.data.ptr
     if self._bound[0] is not data:  # Views into this mjData, kept with it.
       model = physics.model.ptr
       self._bound = (data, (data.geom_xpos, data.geom_xmat, model.geom_size,
                             model.geom_type.astype(np.int32),
-                            terrain_geoms(model, self._group)))
+                            raycast.terrain_geoms(model, self._group)))
     return self._bound[1]
 
   def __call__(self, physics, frames):
@@ -192,35 +193,20 @@ class HeightSampler:
                             *self.ray_args, out, 0)
     return out
 
-
-# Geom types `mju_rayGeom` handles; meshes, height fields and SDFs need
-# MuJoCo's own ray functions.
-_PRIMITIVE_GEOMS = frozenset(int(t) for t in (
-    mujoco.mjtGeom.mjGEOM_PLANE, mujoco.mjtGeom.mjGEOM_SPHERE,
-    mujoco.mjtGeom.mjGEOM_CAPSULE, mujoco.mjtGeom.mjGEOM_ELLIPSOID,
-    mujoco.mjtGeom.mjGEOM_CYLINDER, mujoco.mjtGeom.mjGEOM_BOX))
-
-
-def terrain_geoms(model, geom_group):
-  """Ids of the geoms a ray sees with `mj_ray`'s filters (no excluded body,
-  static geoms included): visible (alpha of the geom, or of its material,
-  above 0) and in a group enabled in `geom_group`.
-
-  Raises:
-    ValueError: if one of them is not a primitive (a mesh, height field or
-      SDF), which the compiled height kernel cannot ray-cast.
-  """
-  alpha = np.where(model.geom_matid >= 0,
-                   model.mat_rgba[np.maximum(model.geom_matid, 0), 3]
-                   if model.nmat else 1.0, model.geom_rgba[:, 3])
-  group = np.clip(model.geom_group, 0, len(geom_group) - 1)
-  ids = np.flatnonzero((alpha != 0) & (geom_group[group] != 0))
-  for g in ids:
-    if int(model.geom_type[g]) not in _PRIMITIVE_GEOMS:
-      name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)
-      raise ValueError(
-          f"Terrain geom {name or g!r} is a "
-          f"{mujoco.mjtGeom(model.geom_type[g]).name}; height samples support "
-          "primitive geoms only (plane, sphere, capsule, ellipsoid, cylinder, "
-          "box).")
-  return ids.astype(np.int64)
+  def multi_ray(self, physics, frames):
+    """`self(physics, frames)` through MuJoCo's `mj_multiRay` (every geom,
+    `mj_ray`'s filters), one call per agent: the plain path."""
+    model, data = physics.model.ptr, physics.data.ptr
+    out = np.empty((len(frames.cos), self._num))
+    dist = np.empty(self._num)
+    geom_ids = np.zeros(self._num, np.int32)
+    lx, ly, lz = self._local_dirs.T
+    for i, (x, y) in enumerate(frames.position[:, :2]):
+      dx, dy = kernels.rotate.py_func(frames.cos[i], frames.sin[i], lx, ly)
+      directions = np.stack([dx, dy, lz], -1)
+      mujoco.mj_multiRay(model, data, np.array([x, y, _RAY_ORIGIN_HEIGHT]),
+                         directions.ravel(), self._group, 1, -1, geom_ids,
+                         dist, None, self._num, mujoco.mjMAXVAL)
+      out[i] = kernels.ray_height(dist, self._scale, _RAY_ORIGIN_HEIGHT,
+                                  _NO_HIT_HEIGHT)
+    return out

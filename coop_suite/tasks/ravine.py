@@ -123,7 +123,7 @@ class Ravine(base.CoopTask):
     """`measure` of this physics state (computed once per state, after the
     status update of the step that reached it: the nearest crosser skips
     crossers that have fallen in or crossed)."""
-    return self.per_state("measure", physics, lambda: measure(
+    return self.per_state("measure", lambda: measure(
         self.frames(physics).packed, self._is_crosser,
         self._fallen | self._crossed,
         self._markers, self.stage == "pushers", physics.data.ptr.xpos,

@@ -101,7 +101,7 @@ class Transport(base.CoopTask):
       return measure(self.frames(physics).packed, data.xpos, data.cvel,
                      self.cylinder.body_id, self._arena.target_position,
                      self._scales)
-    return self.per_state("measure", physics, compute)
+    return self.per_state("measure", compute)
 
   def _update_status(self, physics):
     measured = self._measure(physics)
