@@ -15,9 +15,13 @@ Ray notes (see docs/training.md): actors run with `JAX_PLATFORMS=cpu` and
 single-threaded XLA/OpenMP, set through the actor's runtime environment
 before JAX starts; they never fork. `init_ray` starts a local instance
 quietly, listening on loopback only (its remaining Prometheus endpoints
-too), with no dashboard and no core metrics; `--ray-address` joins a cluster with the cluster's own settings.
+too), with no dashboard and no core metrics; `--ray-address` joins a
+cluster with the cluster's own settings (its token, see docs/training.md),
+and actors are spread over its nodes.
 """
 import logging
+import os
+import socket
 import time
 from typing import Any, Callable, Optional
 
@@ -61,13 +65,61 @@ class LocalPool:
     self._worker.close()
 
 
+class ClusterUnreachable(ConnectionError):
+  """`--ray-address` names no Ray cluster that lets this process join."""
+
+
+AUTH_HELP = (
+    'A cluster with token authentication (`ray start --head` turns it on '
+    'where ~/.ray/auth_token exists) needs RAY_AUTH_MODE=token here too, '
+    'with its token in ~/.ray/auth_token, RAY_AUTH_TOKEN or '
+    'RAY_AUTH_TOKEN_PATH (docs/training.md, "Running on a Ray cluster").')
+
+
+def check_reachable(address: str, timeout: float = 5.0,
+                    where: str = '--ray-address') -> None:
+  """Raises `ClusterUnreachable` at once when nothing listens at a
+  'host:port' or 'ray://host:port' address (Ray itself retries for
+  minutes); 'auto' and other forms are left to Ray."""
+  host_port = address.removeprefix('ray://')
+  host, _, port = host_port.rpartition(':')
+  if not host or not port.isdigit():
+    return
+  try:
+    socket.create_connection((host.strip('[]'), int(port)), timeout).close()
+  except OSError as e:
+    raise ClusterUnreachable(
+        f'{where} {address}: no Ray cluster answers there ({e}); '
+        'start one with `ray start --head` or check the address.') from e
+
+
+def _join(address: str, quiet: dict[str, Any], where: str) -> None:
+  import ray  # pylint: disable=g-import-not-at-top
+  check_reachable(address, where=where)
+  try:
+    ray.init(address=address, **quiet)
+  except ConnectionError as e:
+    # Ray reports a refused token as a failure to connect, after ~20 s.
+    mode = os.environ.get('RAY_AUTH_MODE')
+    hint = (f' (RAY_AUTH_MODE is {mode or "unset"} here). {AUTH_HELP}'
+            if mode != 'token' else '; is the token the cluster\'s?')
+    raise ClusterUnreachable(
+        f'{where} {address}: could not join: {e}{hint}') from e
+
+
 def init_ray(address: str = '', num_cpus: Optional[int] = None) -> bool:
   """Starts (or joins) Ray quietly; returns whether this call started it.
 
   Args:
-    address: an existing cluster ('auto', 'ray://host:port', ...); empty
-      starts a local instance with `num_cpus` CPUs.
+    address: an existing cluster ('auto', 'host:port' of its head, ...);
+      empty joins $RAY_ADDRESS when set (as `ray job submit` sets it), else
+      starts a local instance with `num_cpus` CPUs, never joining a
+      cluster that `ray start` left on this machine.
     num_cpus: CPUs of the local instance (None: all of this machine).
+
+  Raises:
+    ClusterUnreachable: nothing answers at `address`, or the cluster
+      refused this process (e.g. without its token).
   """
   import ray  # pylint: disable=g-import-not-at-top
   if ray.is_initialized():
@@ -75,7 +127,10 @@ def init_ray(address: str = '', num_cpus: Optional[int] = None) -> bool:
   quiet = dict(logging_level=logging.WARNING, log_to_driver=False,
                configure_logging=True)
   if address:
-    ray.init(address=address, **quiet)
+    _join(address, quiet, '--ray-address')
+    return True
+  if os.environ.get('RAY_ADDRESS'):
+    _join(os.environ['RAY_ADDRESS'], quiet, 'RAY_ADDRESS')
     return True
   # A local instance owned by this command: Ray's notice that it protects
   # the instance with a token (its default) is noise here.
@@ -92,7 +147,9 @@ def init_ray(address: str = '', num_cpus: Optional[int] = None) -> bool:
   cluster_mode = ray_constants.ENABLE_RAY_CLUSTER
   ray_constants.ENABLE_RAY_CLUSTER = False
   try:
-    ray.init(num_cpus=num_cpus, include_dashboard=False,
+    # 'local': a new instance even where ray.init() would join the cluster
+    # of the last `ray start` (/tmp/ray/ray_current_cluster).
+    ray.init(address='local', num_cpus=num_cpus, include_dashboard=False,
              # No core metrics collection: nothing here reads it.
              _system_config={'enable_metrics_collection': False}, **quiet)
   finally:
@@ -120,12 +177,20 @@ class RayPool:
     self._ray = ray
     remote = ray.remote(num_cpus=1, max_restarts=max_restarts,
                         max_task_retries=0)(rollout.RolloutWorker)
-    remote = remote.options(runtime_env={'env_vars': ACTOR_ENV_VARS})
+    # SPREAD: on a cluster, one actor per node in turn rather than filling
+    # the learner's node first (one node: no difference).
+    remote = remote.options(runtime_env={'env_vars': ACTOR_ENV_VARS},
+                            scheduling_strategy='SPREAD')
     # The spec (with the controller's bytes) goes to the object store once
     # and reaches the workers with their first rollout, never as a
     # constructor argument: Ray cannot restart an actor whose large
     # constructor arguments it dropped (ray-project/ray#53727).
     self._spec_ref = ray.put(spec)
+    cpus = ray.cluster_resources().get('CPU', 0)
+    if cpus < len(seeds):
+      print(f'Ray has {cpus:.0f} CPUs for {len(seeds)} actors of 1 CPU '
+            'each: the rest wait until CPUs are added (an autoscaling '
+            'cluster adds nodes).', flush=True)
     self._workers = [remote.remote(None, config, i, seed, num_envs)
                      for i, seed in enumerate(seeds)]
     self._max_restarts = max_restarts

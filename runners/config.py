@@ -61,8 +61,10 @@ class TrainArgs:
   logdir: str = ''
   """Run directory; default runs/<task>_<agent>_n<n_agents>_s<seed>."""
   ray_address: str = ''
-  """Join this Ray cluster (e.g. 'auto' or 'ray://host:10001'); empty
-  starts a local Ray instance owned by this command."""
+  """Join this Ray cluster: 'auto' or its head's HOST:6379, run on one of
+  its nodes (docs/training.md, "Running on a Ray cluster"); empty joins
+  $RAY_ADDRESS if set, else starts a local Ray instance owned by this
+  command."""
   resume: bool = False
   """Continue from the newest checkpoint in logdir that reads completely."""
   resume_from: str = ''
