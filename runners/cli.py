@@ -82,4 +82,5 @@ def fail(prog: str, error: Exception):
   when COOP_TRACEBACK is set (e.g. to report a bug)."""
   if os.environ.get('COOP_TRACEBACK'):
     raise error
-  sys.exit(f'{prog}: error: {error}')
+  print(f'{prog}: error: {error}', file=sys.stderr, flush=True)
+  sys.exit(2)

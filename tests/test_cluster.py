@@ -114,11 +114,12 @@ def test_training_spreads_actors_over_two_nodes(cluster, tmp_path):
   assert [sorted(n) for n in actor_nodes] == [sorted(raylets.values())] * 2
 
 
-def test_unreachable_address_is_one_line(tmp_path):
+def test_unreachable_address_is_one_line(tmp_path, capsys):
   with pytest.raises(SystemExit) as stop:
     train.main(['--ray-address', f'127.0.0.1:{_free_port()}', '--logdir',
                 str(tmp_path / 'run'), '--total-steps', '1'])
-  message = str(stop.value.code)
+  assert stop.value.code == 2
+  message = capsys.readouterr().err.strip().splitlines()[-1]
   assert message.startswith('coop-train: error: --ray-address 127.0.0.1:')
   assert 'no Ray cluster answers there' in message
   assert '\n' not in message

@@ -315,4 +315,5 @@ def test_bad_eval_flags_name_the_flag(argv, flag, capsys):
 def test_user_errors_are_one_line(tmp_path, capsys):
   with pytest.raises(SystemExit) as exit_info:
     evaluate.main(['--checkpoint', str(tmp_path)])
-  assert exit_info.value.code.startswith('coop-eval: error: No checkpoint')
+  assert exit_info.value.code == 2
+  assert capsys.readouterr().err.startswith('coop-eval: error: No checkpoint')
