@@ -1,8 +1,9 @@
 """Atomic checkpoint files of a learner's training state (flax msgpack).
 
-Factored out of `agents.ppo.learning.PPOLearner.save/restore` so that every
-learner writes the same kind of file: `{'format', 'kind', 'state'}` where
-`state` is the training-state pytree as a flax state dict.
+A file is `{'format', 'kind', 'state'}` where `state` is the training-state
+pytree as a flax state dict; `kind` names the learner (and the hierarchy's
+variant) so that a file never loads into another learner, `format` its
+layout (`agents.ppo.learning.PPOLearner` reads the older ones).
 """
 import os
 from typing import Any
@@ -12,13 +13,18 @@ import jax
 import jax.numpy as jnp
 
 
+def to_state_dict(state: Any) -> dict[str, Any]:
+  """`state` (a pytree of arrays) as a flax state dict of host arrays."""
+  return serialization.to_state_dict(jax.device_get(state))
+
+
 def save_state(path: str, state: Any, kind: str, format_version: int) -> None:
   """Writes `state` (a pytree of arrays) to `path`, atomically.
 
   The file is written next to `path` and moved over it with `os.replace`, so
   a crash never leaves a truncated checkpoint behind.
   """
-  state_dict = serialization.to_state_dict(jax.device_get(state))
+  state_dict = to_state_dict(state)
   data = serialization.msgpack_serialize(
       {'format': format_version, 'kind': kind, 'state': state_dict})
   directory = os.path.dirname(os.path.abspath(path))
@@ -60,16 +66,3 @@ def from_state_dict(path: str, template: Any, state_dict: Any) -> Any:
                      'with different networks or config?')
   return state
 
-
-def restore_state(path: str, template: Any, kind: str,
-                  format_version: int) -> Any:
-  """Reads a file written by `save_state` into the structure of `template`.
-
-  Raises ValueError when the file is of another kind or format, or holds
-  arrays of other shapes than `template` (other networks or config).
-  """
-  file_format, state_dict = read(path, kind)
-  if file_format != format_version:
-    raise ValueError(f'{path} is not a {kind} checkpoint of format '
-                     f'{format_version} (it has format {file_format}).')
-  return from_state_dict(path, template, state_dict)

@@ -75,7 +75,7 @@ def learner_seconds(args, samples=65536):
   """Seconds of one learner step on `samples` commands (default sizes)."""
   import jax  # pylint: disable=g-import-not-at-top
   from agents.hierarchy import builder as hierarchy_builder  # pylint: disable=g-import-not-at-top
-  from agents.hierarchy import types  # pylint: disable=g-import-not-at-top
+  from agents.ppo import types  # pylint: disable=g-import-not-at-top
   config = config_lib.hierarchy_config(config_lib.TrainArgs(task=args.task))
   builder = hierarchy_builder.HierarchyBuilder(config)
   obs_dim = args.observation_size

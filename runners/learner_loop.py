@@ -30,7 +30,7 @@ import jax
 import numpy as np
 
 from agents.hierarchy import builder as hierarchy_builder
-from agents.hierarchy import types
+from agents.ppo import types
 from runners import actor_pool
 from runners import checkpoints
 from runners import config as config_lib

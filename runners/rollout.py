@@ -29,7 +29,7 @@ import numpy as np
 from agents import core
 from agents import observations as obs_lib
 from agents.hierarchy import builder as hierarchy_builder
-from agents.hierarchy import types
+from agents.ppo import types
 from runners import envs as envs_lib
 
 _MID, _LAST = 1, 2  # dm_env.StepType values.

@@ -264,7 +264,7 @@ def test_the_stability_figures_are_logged_and_checkpointed(hrl_run):
       saved['global_state_size']))
   learner.restore(os.path.join(checkpoint, 'ant.msgpack'))
   assert float(learner.state.value_normalizer.count) == 2 * 4 * 4
-  assert int(learner.state.step) == 2
+  assert int(learner.state.update) == 2
 
 
 def test_the_first_transport_run_still_evaluates(capsys):
@@ -308,7 +308,7 @@ def test_init_from_starts_each_species_from_its_stage_run(
     for name in ('params', 'normalizer', 'value_normalizer'):
       jax.tree.map(np.testing.assert_array_equal, getattr(got, name),
                    getattr(want, name))
-    assert int(want.step) > 0 and int(got.step) == 0  # Fresh optimiser.
+    assert int(want.update) > 0 and int(got.update) == 0  # Fresh optimiser.
     jax.tree.map(np.testing.assert_array_equal, got.opt_state,
                  fresh[species].opt_state)
   # And through the whole run: it trains on from there.

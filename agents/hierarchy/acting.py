@@ -30,7 +30,7 @@ from agents import core
 from agents import normalization
 from agents.hierarchy import config as hierarchy_config
 from agents.hierarchy import networks as hierarchy_networks
-from agents.hierarchy import types
+from agents.ppo import types
 from agents.networks import distributions
 
 _MID, _LAST = 1, 2  # dm_env.StepType values; no dm_env import for two ints.

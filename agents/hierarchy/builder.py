@@ -22,7 +22,7 @@ from agents.hierarchy import acting
 from agents.hierarchy import config as hierarchy_config
 from agents.hierarchy import learning
 from agents.hierarchy import networks as hierarchy_networks
-from agents.hierarchy import types
+from agents.ppo import types
 
 
 class HierarchyBuilder:

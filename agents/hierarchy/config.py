@@ -10,6 +10,8 @@ species.
 """
 import dataclasses
 
+from agents.ppo import config as ppo_config
+
 AGENTS = ('hrl', 'no_memory', 'flat', 'mappo')
 CRITICS = ('separate', 'stop_gradient', 'shared')
 
@@ -133,16 +135,30 @@ class HierarchyConfig:
     return self.agent in ('hrl', 'mappo')
 
   @property
-  def observation_prefixes(self) -> tuple[str, ...]:
-    """Observation groups the networks read, in flattening order (see
-    `agents.observations.flatten`): exteroception for the upper layer;
-    'flat' has no lower layer, so it also reads proprioception."""
-    return ('proprio', 'extero') if self.agent == 'flat' else ('extero',)
+  def uses_commands(self) -> bool:
+    """Whether the policy commands the frozen lower layer (every variant but
+    'flat', which emits joint actions every control step)."""
+    return self.agent != 'flat'
 
   @property
   def uses_global_state(self) -> bool:
-    """Whether the critic reads a `global_state` input."""
+    """Whether the critic reads a `global_state` input ('mappo')."""
     return self.agent == 'mappo'
+
+  @property
+  def observation_prefixes(self) -> tuple[str, ...]:
+    """Observation groups the networks read, in flattening order (see
+    `agents.observations.flatten`): exteroception for the upper layer;
+    without the lower layer ('flat') also proprioception."""
+    return ('extero',) if self.uses_commands else ('proprio', 'extero')
+
+  @property
+  def carry_size(self) -> int:
+    """C, the carry width of actor and learner: the middle layer's state,
+    then a separate critic's (2H); one width for every variant, carried but
+    unused without memory."""
+    separate_critic = self.critic == 'separate' and self.uses_commands
+    return self.middle_layer_size * (2 if separate_critic else 1)
 
   def __post_init__(self):
     if self.agent not in AGENTS:
@@ -151,22 +167,9 @@ class HierarchyConfig:
     if self.critic not in CRITICS:
       raise ValueError(f'HierarchyConfig.critic must be one of {CRITICS}, '
                        f'got {self.critic!r}.')
-    positive = ('learning_rate', 'adam_epsilon', 'clip_epsilon',
-                'max_grad_norm', 'num_epochs', 'num_minibatches',
-                'reward_scaling', 'observation_clip', 'sequence_length',
-                'middle_layer_size')
-    for name in positive:
-      if not getattr(self, name) > 0:
-        raise ValueError(f'HierarchyConfig.{name} must be > 0, got '
-                         f'{getattr(self, name)!r}.')
-    for name in ('discount', 'gae_lambda'):
-      if not 0.0 <= getattr(self, name) <= 1.0:
-        raise ValueError(f'HierarchyConfig.{name} must be in [0, 1], got '
-                         f'{getattr(self, name)!r}.')
-    for name in ('entropy_cost', 'value_cost', 'target_kl', 'min_action_std'):
-      if getattr(self, name) < 0:
-        raise ValueError(f'HierarchyConfig.{name} must be >= 0, got '
-                         f'{getattr(self, name)!r}.')
+    ppo_config.validate(
+        self, positive=('sequence_length', 'middle_layer_size'),
+        non_negative=('min_action_std',))
     # Lists from a CLI or JSON become tuples, keeping the config hashable.
     for name in ('upper_layer_sizes', 'head_sizes', 'critic_sizes',
                  'flat_sizes'):

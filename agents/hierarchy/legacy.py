@@ -18,6 +18,7 @@ import jax
 import numpy as np
 import optax
 
+from agents import checkpointing
 from agents import normalization
 
 FORMAT = 1
@@ -32,7 +33,8 @@ def _same_shapes(a, b) -> bool:
 
 def convert(old: dict[str, Any], template: Any,
             optimizer: optax.GradientTransformation) -> dict[str, Any]:
-  """A format-1 state dict as a state dict of today's `TrainingState`.
+  """A format-1 state dict as a state dict of today's `TrainingState` (the
+  update counter keeps its old name, `step`).
 
   Args:
     old: the state dict read from a format-1 file.
@@ -40,7 +42,7 @@ def convert(old: dict[str, Any], template: Any,
       lacks keep the template's parameters.
     optimizer: the learner's optimiser, initialised afresh on the result.
   """
-  new = serialization.to_state_dict(jax.device_get(template))
+  new = checkpointing.to_state_dict(template)
   old_modules = old['params']['params']
   modules = {}
   for name, current in new['params']['params'].items():
@@ -57,8 +59,7 @@ def convert(old: dict[str, Any], template: Any,
       'opt_state': serialization.to_state_dict(optimizer.init(params)),
       'normalizer': old['normalizer'],
       'global_state_normalizer': old['global_state_normalizer'],
-      'value_normalizer': serialization.to_state_dict(
-          jax.device_get(normalization.init(1))),
+      'value_normalizer': checkpointing.to_state_dict(normalization.init(1)),
       'step': old['step'],
       'key': old['key'],
   }

@@ -8,8 +8,10 @@ with any parameter version it pulled.
 Observations arrive already normalised (see `agents.normalization`); shapes
 are [..., obs_dim] with any leading axes ([B], [T, B], ...).
 
-A recurrent variant (the hierarchy's GRU middle layer) will produce the same
-`dist_params` layout and reuse `NormalTanhDistribution` and the PPO loss.
+`unroll` gives these networks the interface of the recurrent ones
+(`agents.hierarchy.networks`) with an empty carry, so one PPO learner
+(`agents.ppo.learning`) trains both: a feed-forward network is a recurrent
+one without memory.
 """
 import dataclasses
 from typing import Any, Callable, Optional, Sequence
@@ -33,14 +35,25 @@ class PolicyValueNetworks:
     init: key -> params.
     apply_policy: (params, obs [..., obs_dim]) -> dist_params [..., 2A].
     apply_value: (params, obs [..., obs_dim]) -> value [...].
+    unroll: (params, carry [B, 0], observation [T, B, obs_dim], reset, global
+      state) -> (carry, dist_params [T, B, 2A], value [T, B]); reset and
+      global state are ignored (`agents.hierarchy.networks` has the same
+      signature).
     distribution: how to read `dist_params` (sample, log_prob, entropy).
     observation_size: obs_dim the networks expect.
+    action_size: A.
+    carry_size: 0, no memory.
+    global_state_size: None, no global state.
   """
   init: Callable[[jax.Array], Params]
   apply_policy: Callable[[Params, jax.Array], jax.Array]
   apply_value: Callable[[Params, jax.Array], jax.Array]
+  unroll: Callable[..., tuple[jax.Array, jax.Array, jax.Array]]
   distribution: distributions.NormalTanhDistribution
   observation_size: int
+  action_size: int
+  carry_size: int = 0
+  global_state_size: Optional[int] = None
 
 
 def make_policy_value_networks(
@@ -74,9 +87,15 @@ def make_policy_value_networks(
   def apply_value(params: Params, obs: jax.Array) -> jax.Array:
     return jnp.squeeze(value_module.apply(params['value'], obs), axis=-1)
 
+  def unroll(params, carry, observation, reset=None, global_state=None):
+    del reset, global_state  # No memory, no global state.
+    return (carry, apply_policy(params, observation),
+            apply_value(params, observation))
+
   return PolicyValueNetworks(
       init=init, apply_policy=apply_policy, apply_value=apply_value,
-      distribution=distribution, observation_size=obs_dim)
+      unroll=unroll, distribution=distribution, observation_size=obs_dim,
+      action_size=action_dim)
 
 
 def make_inference_fn(

@@ -2,8 +2,9 @@
 
 The actor steps B environments (or B agents, IPPO-style) at once:
 `select_action(obs [B, obs_dim]) -> action [B, A]`. With `observe_first` /
-`observe` it also records the segment into a `types.Rollout` that
-`take_rollout()` hands to the learner.
+`observe` it also records the segment into a `types.SequenceBatch` (without
+reset and carry: the networks have no memory) that `take_rollout()` hands
+to the learner.
 
 Timesteps are dm_env-style with a leading batch axis: `observation [B, D]`,
 `reward [B]`, `discount [B]`, `step_type [B]`. The runner resets finished
@@ -28,6 +29,8 @@ from agents.ppo import config as ppo_config
 from agents.ppo import types
 
 _LAST = 2  # dm_env.StepType.LAST; no dm_env import needed for one constant.
+_FIELDS = ('observation', 'raw_action', 'log_prob', 'reward', 'discount',
+           'truncation')  # The SequenceBatch fields a memoryless actor fills.
 
 
 class PPOActor(core.Actor):
@@ -100,15 +103,16 @@ class PPOActor(core.Actor):
     segment['truncation'].append((last & (discount > 0)).astype(np.float32))
     self._extras = None  # One observe per select_action.
 
-  def take_rollout(self) -> types.Rollout:
-    """Returns the steps recorded since the last call as a Rollout [T, B].
+  def take_rollout(self) -> types.SequenceBatch:
+    """Returns the steps recorded since the last call as a SequenceBatch
+    [T, B].
 
     The next segment continues from the last observation, with any variables
     pulled meanwhile.
     """
     if self._segment is None or not self._segment['reward']:
       raise RuntimeError('No steps recorded since the last take_rollout.')
-    rollout = types.Rollout(
+    rollout = types.SequenceBatch(
         **{name: np.stack(rows) for name, rows in self._segment.items()})
     self._start_segment(rollout.observation[-1])
     return rollout
@@ -129,5 +133,5 @@ class PPOActor(core.Actor):
     if self._pending_variables is not None:
       self._variables = self._pending_variables
       self._pending_variables = None
-    self._segment = {name: [] for name in types.Rollout._fields}
+    self._segment = {name: [] for name in _FIELDS}
     self._segment['observation'].append(np.asarray(observation, np.float32))

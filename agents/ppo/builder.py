@@ -39,10 +39,10 @@ class PPOBuilder:
 
   def make_learner(
       self, networks: policy_value.PolicyValueNetworks,
-      rollouts: Optional[Iterator[types.Rollout]] = None,
+      batches: Optional[Iterator[types.SequenceBatch]] = None,
   ) -> learning.PPOLearner:
-    """A learner, optionally pulling rollouts from an iterator in `step()`."""
-    return learning.PPOLearner(networks, self.config, rollouts,
+    """A learner, optionally pulling batches from an iterator in `step()`."""
+    return learning.PPOLearner(networks, self.config, batches,
                                key=self._learner_key)
 
   def make_actor(self, networks: policy_value.PolicyValueNetworks,

@@ -1,7 +1,10 @@
-"""PPO hyper-parameters, one frozen dataclass passed whole.
+"""PPO hyper-parameters of the lower layer's pretraining, one frozen
+dataclass passed whole, and the checks every PPO config shares.
 
-Defaults follow Brax's and CleanRL's continuous-control PPO; the paper's
-hierarchy starts from Adam lr 5e-4 and discount 0.995 (set them explicitly).
+Defaults follow Brax's and CleanRL's continuous-control PPO. The upper and
+middle layer's config (`agents.hierarchy.config.HierarchyConfig`) has the
+same optimisation and objective fields, so one learner
+(`agents.ppo.learning`) reads either.
 """
 import dataclasses
 
@@ -52,22 +55,47 @@ class PPOConfig:
   activation: str = 'swish'
   """Hidden activation of both MLPs, by name (see `agents.networks.mlp`)."""
 
+  @property
+  def target_kl(self) -> float:
+    """0: a constant learning rate (Brax's settings for the lower layer; the
+    KL-adaptive rate is `HierarchyConfig.target_kl`)."""
+    return 0.0
+
+  @property
+  def normalize_values(self) -> bool:
+    """False: the critic predicts (scaled) returns directly."""
+    return False
+
   def __post_init__(self):
-    positive = ('learning_rate', 'adam_epsilon', 'clip_epsilon',
-                'max_grad_norm', 'num_epochs', 'num_minibatches',
-                'reward_scaling', 'observation_clip')
-    for name in positive:
-      if not getattr(self, name) > 0:
-        raise ValueError(f'PPOConfig.{name} must be > 0, got '
-                         f'{getattr(self, name)!r}.')
-    for name in ('discount', 'gae_lambda'):
-      if not 0.0 <= getattr(self, name) <= 1.0:
-        raise ValueError(f'PPOConfig.{name} must be in [0, 1], got '
-                         f'{getattr(self, name)!r}.')
-    for name in ('entropy_cost', 'value_cost'):
-      if getattr(self, name) < 0:
-        raise ValueError(f'PPOConfig.{name} must be >= 0, got '
-                         f'{getattr(self, name)!r}.')
+    validate(self)
     # Lists from a CLI or JSON become tuples, keeping the config hashable.
     object.__setattr__(self, 'policy_hidden', tuple(self.policy_hidden))
     object.__setattr__(self, 'value_hidden', tuple(self.value_hidden))
+
+
+def validate(config, positive: tuple[str, ...] = (),
+             non_negative: tuple[str, ...] = ()) -> None:
+  """Checks the PPO fields of a config (`PPOConfig`, `HierarchyConfig`).
+
+  Args:
+    config: a config with PPOConfig's optimisation and objective fields.
+    positive, non_negative: the config's own further fields to check.
+
+  Raises:
+    ValueError naming `<config class>.<field>` and the bad value.
+  """
+  name_of = lambda field: f'{type(config).__name__}.{field}'
+  for field in ('learning_rate', 'adam_epsilon', 'clip_epsilon',
+                'max_grad_norm', 'num_epochs', 'num_minibatches',
+                'reward_scaling', 'observation_clip', *positive):
+    if not getattr(config, field) > 0:
+      raise ValueError(f'{name_of(field)} must be > 0, got '
+                       f'{getattr(config, field)!r}.')
+  for field in ('discount', 'gae_lambda'):
+    if not 0.0 <= getattr(config, field) <= 1.0:
+      raise ValueError(f'{name_of(field)} must be in [0, 1], got '
+                       f'{getattr(config, field)!r}.')
+  for field in ('entropy_cost', 'value_cost', 'target_kl', *non_negative):
+    if getattr(config, field) < 0:
+      raise ValueError(f'{name_of(field)} must be >= 0, got '
+                       f'{getattr(config, field)!r}.')

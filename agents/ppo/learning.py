@@ -1,12 +1,19 @@
-"""PPO learner: a NamedTuple training state and one jit-compiled update.
+"""The PPO learner: recurrent PPO over stored sequences (truncated BPTT).
 
-`make_update_fn` returns the pure `update(state, rollout) -> (state, metrics)`
-(the whole PPO iteration: statistics, GAE, epochs x minibatches of SGD);
-`PPOLearner` wraps it with Acme's Learner interface and checkpoint files.
+One learner for every network: the hierarchy's upper and middle layer
+(`agents.hierarchy.networks`, a GRU or none) and the lower layer's
+feed-forward policy (`agents.networks.policy_value`), which is a recurrent
+network without memory (carry width 0). `make_update_fn` returns the pure
+`update(state, batch) -> (state, metrics)`: statistics, one replay of every
+sequence for values and GAE (`agents.ppo.returns`, value normalisation),
+then epochs x minibatches of SGD where each minibatch re-unrolls the network
+from the stored `initial_carry` (PureJaxRL `ppo_rnn`), with a KL-adaptive
+learning rate (`agents.ppo.step_size`). Minibatches permute the row axis B
+only, so sequences stay whole. `PPOLearner` wraps it with Acme's Learner
+interface and checkpoint files (`agents.checkpointing`).
 
-Minibatches are drawn by permuting the batch axis B and keeping time whole
-(PureJaxRL's recurrent layout), so a recurrent learner can reuse this scheme
-with sequences that start from stored hidden states.
+The config is a `PPOConfig` or a `HierarchyConfig`: both have the fields
+read here (`target_kl` and `normalize_values` are properties of PPOConfig).
 """
 from typing import Any, Iterator, NamedTuple, Optional, Sequence
 
@@ -17,14 +24,14 @@ import optax
 from agents import checkpointing
 from agents import core
 from agents import normalization
-from agents.networks import policy_value
-from agents.ppo import config as ppo_config
 from agents.ppo import losses
 from agents.ppo import returns
 from agents.ppo import step_size
 from agents.ppo import types
 
-_CHECKPOINT_FORMAT = 1
+# 3: one state for every PPO learner, its counter named `update` (formats 1
+# and 2, the feed-forward and hierarchy learners' own, named it `step`).
+_CHECKPOINT_FORMAT = 3
 _CHECKPOINT_KIND = 'ppo'
 
 
@@ -32,32 +39,76 @@ class TrainingState(NamedTuple):
   """Everything that changes during training (and goes into checkpoints).
 
   Attributes:
-    params: network parameters, {'policy': ..., 'value': ...}.
-    opt_state: optax state of the optimiser chain.
+    params: network parameters (Flax variables).
+    opt_state: optax state of the optimiser chain (with the learning rate
+      when it is KL-adaptive).
     normalizer: observation statistics used by the current params.
-    step: number of updates done, int32 scalar.
+    global_state_normalizer: global-state statistics ('mappo'; otherwise
+      0-dimensional and never updated).
+    value_normalizer: [1]-dimensional statistics of the value targets, which
+      the critic predicts standardised (never updated without
+      `normalize_values`).
+    update: number of updates done, int32 scalar (the version of the
+      parameters that actors act with).
     key: PRNG key (raw uint32 [2]) for shuffling and entropy estimates.
   """
   params: Any
   opt_state: optax.OptState
   normalizer: normalization.NormalizerState
-  step: jax.Array
+  global_state_normalizer: normalization.NormalizerState
+  value_normalizer: normalization.NormalizerState
+  update: jax.Array
   key: jax.Array
 
 
-def make_optimizer(
-    config: ppo_config.PPOConfig) -> optax.GradientTransformation:
-  """Adam after global-norm gradient clipping (`step_size.make_optimizer`)."""
-  return step_size.make_optimizer(config)
+def make_initial_state(networks, optimizer: optax.GradientTransformation,
+                       key: jax.Array) -> TrainingState:
+  """Fresh parameters, optimiser state and empty statistics."""
+  init_key, key = jax.random.split(key)
+  params = networks.init(init_key)
+  return TrainingState(
+      params=params, opt_state=optimizer.init(params),
+      normalizer=normalization.init(networks.observation_size),
+      global_state_normalizer=normalization.init(
+          networks.global_state_size or 0),
+      value_normalizer=normalization.init(1),
+      update=jnp.zeros((), jnp.int32), key=key)
 
 
-def loss_options(config) -> dict:
-  """The keyword options of `losses.ppo_loss` taken from a PPO-style config
-  (shared by this learner and `agents.hierarchy`)."""
-  return dict(clip_epsilon=config.clip_epsilon,
-              clip_value_loss=config.clip_value_loss,
-              entropy_cost=config.entropy_cost, value_cost=config.value_cost,
-              normalize_advantages=config.normalize_advantages)
+def _check_batch(networks, config, batch: types.SequenceBatch) -> None:
+  """Shape errors at trace time, in the user's words."""
+  steps, batch_size = batch.reward.shape
+  expected = {
+      'observation': (steps + 1, batch_size, networks.observation_size),
+      'raw_action': (steps, batch_size, networks.action_size),
+  }
+  if batch.initial_carry is not None or networks.carry_size:
+    expected['reset'] = (steps + 1, batch_size)
+    expected['initial_carry'] = (batch_size, networks.carry_size)
+  if networks.global_state_size is not None:
+    expected['global_state'] = (steps + 1, batch_size,
+                                networks.global_state_size)
+  for name, shape in expected.items():
+    value = getattr(batch, name)
+    if value is None:
+      raise ValueError(f'These networks need SequenceBatch.{name} {shape}.')
+    if value.shape != shape:
+      raise ValueError(f'SequenceBatch.{name} has shape {value.shape}, '
+                       f'expected {shape}.')
+  if batch_size % config.num_minibatches:
+    raise ValueError(
+        f'The batch size B={batch_size} must be divisible by '
+        f'num_minibatches={config.num_minibatches}.')
+
+
+def _with_empty_memory(batch: types.SequenceBatch) -> types.SequenceBatch:
+  """A batch of a network without memory (no reset, no carry) with an empty
+  carry [B, 0] and no resets, so it replays like any other."""
+  if batch.initial_carry is not None:
+    return batch
+  steps, batch_size = batch.reward.shape
+  return batch._replace(reset=jnp.zeros((steps + 1, batch_size), bool),
+                        initial_carry=jnp.zeros((batch_size, 0)))
 
 
 def make_sgd_step(loss_fn, optimizer: optax.GradientTransformation,
@@ -84,137 +135,175 @@ def make_sgd_step(loss_fn, optimizer: optax.GradientTransformation,
   return sgd_step
 
 
-def make_initial_state(networks: policy_value.PolicyValueNetworks,
-                       optimizer: optax.GradientTransformation,
-                       key: jax.Array) -> TrainingState:
-  """Fresh parameters, optimiser state and empty observation statistics."""
-  init_key, key = jax.random.split(key)
-  params = networks.init(init_key)
-  return TrainingState(
-      params=params,
-      opt_state=optimizer.init(params),
-      normalizer=normalization.init(networks.observation_size),
-      step=jnp.zeros((), jnp.int32),
-      key=key)
+def make_update_fn(networks, config, optimizer: optax.GradientTransformation):
+  """Builds the pure `update(state, batch) -> (state, metrics)`; jit it.
 
+  Args:
+    networks: `HierarchyNetworks` or `PolicyValueNetworks` (their `unroll`,
+      sizes and `distribution`).
+    config: `PPOConfig` or `HierarchyConfig`.
+    optimizer: `step_size.make_optimizer(config)`.
 
-def make_update_fn(networks: policy_value.PolicyValueNetworks,
-                   config: ppo_config.PPOConfig,
-                   optimizer: optax.GradientTransformation):
-  """Builds the pure `update(state, rollout) -> (state, metrics)`; jit it.
-
-  The rollout is a `types.Rollout` with T steps of B environments; B must be
-  divisible by `config.num_minibatches`. Metrics are means over all SGD steps.
+  `batch` is a `types.SequenceBatch` of T steps of B rows (B divisible by
+  `config.num_minibatches`). Metrics are means over all SGD steps (see
+  `agents.ppo.losses.ppo_loss`), plus 'learning_rate' (mean rate of the
+  steps) and 'explained_variance' of the values that made the targets.
   """
   preprocess = normalization.make_preprocess_fn(
       config.normalize_observations, config.observation_clip)
+  uses_global_state = networks.global_state_size is not None
+  loss_options = dict(
+      clip_epsilon=config.clip_epsilon, clip_value_loss=config.clip_value_loss,
+      entropy_cost=config.entropy_cost, value_cost=config.value_cost,
+      normalize_advantages=config.normalize_advantages)
 
-  def make_training_batch(params, normalizer, rollout) -> types.TrainingBatch:
-    observation = preprocess(normalizer, rollout.observation)  # [T+1, B, D]
-    values = networks.apply_value(params, observation)  # [T+1, B]
+  def make_training_batch(params, normalizer, gs_normalizer,
+                          value_normalizer, batch):
+    """(SequenceTrainingBatch, returns.Targets) of `batch`."""
+    observation = preprocess(normalizer, batch.observation)  # [T+1, B, D]
+    global_state = (preprocess(gs_normalizer, batch.global_state)
+                    if uses_global_state else None)
+    # One replay of T + 1 steps gives the values and the bootstrap value.
+    _, _, values = networks.unroll(params, batch.initial_carry, observation,
+                                   batch.reset, global_state)  # [T+1, B]
     targets = returns.compute_targets(
-        values, rollout.reward * config.reward_scaling,
-        config.discount * rollout.discount, rollout.truncation, None,
+        values, batch.reward * config.reward_scaling,
+        config.discount * batch.discount, batch.truncation,
+        value_normalizer if config.normalize_values else None,
         config.gae_lambda)
-    return types.TrainingBatch(
-        observation=observation[:-1], raw_action=rollout.raw_action,
-        behaviour_log_prob=rollout.log_prob,
+    steps = types.TrainingBatch(
+        observation=observation[:-1], raw_action=batch.raw_action,
+        behaviour_log_prob=batch.log_prob,
         behaviour_value=targets.behaviour_value,
         advantage=targets.advantage, target_value=targets.target_value)
+    return types.SequenceTrainingBatch(
+        steps=steps, reset=batch.reset[:-1],
+        initial_carry=batch.initial_carry,
+        global_state=None if global_state is None else global_state[:-1]
+    ), targets
 
-  def loss_fn(params, batch, key):
-    dist_params = networks.apply_policy(params, batch.observation)
-    values = networks.apply_value(params, batch.observation)
-    return losses.ppo_loss(dist_params, values, batch, networks.distribution,
-                           key, **loss_options(config))
+  def loss_fn(params, minibatch: types.SequenceTrainingBatch, key):
+    # Truncated BPTT: gradients flow through the T steps of the sequence but
+    # not into the stored initial carry, which is data.
+    _, dist_params, values = networks.unroll(
+        params, minibatch.initial_carry, minibatch.steps.observation,
+        minibatch.reset, minibatch.global_state)
+    return losses.ppo_loss(dist_params, values, minibatch.steps,
+                           networks.distribution, key, **loss_options)
 
-  sgd_step = make_sgd_step(loss_fn, optimizer)
+  sgd_step = make_sgd_step(loss_fn, optimizer, config.target_kl)
 
-  def epoch(carry, key, batch):
+  def epoch(carry, key, batch: types.SequenceTrainingBatch):
     permutation_key, loss_key = jax.random.split(key)
-    batch_size = batch.advantage.shape[1]
-    permutation = jax.random.permutation(permutation_key, batch_size)
+    permutation = jax.random.permutation(
+        permutation_key, batch.initial_carry.shape[0])
+    m = config.num_minibatches
 
-    def to_minibatches(x):  # [T, B, ...] -> [M, T, B / M, ...], shuffled on B.
-      x = jnp.take(x, permutation, axis=1)
-      x = x.reshape(x.shape[0], config.num_minibatches, -1, *x.shape[2:])
-      return jnp.swapaxes(x, 0, 1)
+    def split(x, axis):  # Shuffle B, then [.., B, ..] -> [M, .., B / M, ..].
+      x = jnp.take(x, permutation, axis=axis)
+      x = x.reshape(*x.shape[:axis], m, x.shape[axis] // m,
+                    *x.shape[axis + 1:])
+      return jnp.moveaxis(x, axis, 0)
 
-    minibatches = jax.tree.map(to_minibatches, batch)
-    keys = jax.random.split(loss_key, config.num_minibatches)
+    minibatches = types.SequenceTrainingBatch(
+        steps=jax.tree.map(lambda x: split(x, 1), batch.steps),
+        reset=split(batch.reset, 1),
+        initial_carry=split(batch.initial_carry, 0),
+        global_state=jax.tree.map(lambda x: split(x, 1), batch.global_state))
+    keys = jax.random.split(loss_key, m)
     return jax.lax.scan(sgd_step, carry, (minibatches, keys))
 
-  def update(state: TrainingState, rollout: types.Rollout):
-    batch_size = rollout.reward.shape[1]
-    if batch_size % config.num_minibatches:
-      raise ValueError(
-          f'The rollout batch size B={batch_size} must be divisible by '
-          f'num_minibatches={config.num_minibatches}.')
+  def update(state: TrainingState, batch: types.SequenceBatch):
+    _check_batch(networks, config, batch)
+    batch = _with_empty_memory(batch)
     # Statistics first, as in Brax: the SGD then fits the parameters to the
     # statistics that the next rollout's actor will use. The behaviour
     # log-probabilities were computed with the old statistics, and the
-    # probability ratio accounts for the difference.
+    # probability ratio accounts for the difference. The bootstrap row is
+    # the next batch's first row, so it is counted once, there.
     normalizer = state.normalizer
+    gs_normalizer = state.global_state_normalizer
     if config.normalize_observations:
-      # The bootstrap row is the next rollout's first row: count it once.
-      normalizer = normalization.update(normalizer, rollout.observation[:-1])
+      normalizer = normalization.update(normalizer, batch.observation[:-1])
+      if uses_global_state:
+        gs_normalizer = normalization.update(gs_normalizer,
+                                             batch.global_state[:-1])
     key, epochs_key = jax.random.split(state.key)
-    batch = make_training_batch(state.params, normalizer, rollout)
+    training_batch, targets = make_training_batch(
+        state.params, normalizer, gs_normalizer, state.value_normalizer,
+        batch)
     (params, opt_state), metrics = jax.lax.scan(
-        lambda carry, key: epoch(carry, key, batch),
+        lambda carry, key: epoch(carry, key, training_batch),
         (state.params, state.opt_state),
         jax.random.split(epochs_key, config.num_epochs))
     metrics = jax.tree.map(jnp.mean, metrics)
-    return TrainingState(params, opt_state, normalizer, state.step + 1,
-                         key), metrics
+    metrics['explained_variance'] = targets.explained_variance
+    if 'learning_rate' not in metrics:  # Constant rate (target_kl = 0).
+      metrics['learning_rate'] = jnp.float32(config.learning_rate)
+    value_normalizer = (targets.value_normalizer if config.normalize_values
+                        else state.value_normalizer)
+    return TrainingState(params, opt_state, normalizer, gs_normalizer,
+                         value_normalizer, state.update + 1, key), metrics
 
   return update
 
 
 class PPOLearner(core.Learner):
-  """Trains PPO on rollouts; publishes `params` and `normalizer`."""
+  """Trains one policy (one species); publishes params and statistics.
+
+  Checkpoint files are `agents.checkpointing` files of kind `checkpoint_kind`
+  ('ppo'; the hierarchy's learner names its variant). `_upgrade` converts
+  the `older_formats` of that kind.
+  """
+
+  checkpoint_kind = _CHECKPOINT_KIND
+  older_formats = (1,)
 
   def __init__(self,
-               networks: policy_value.PolicyValueNetworks,
-               config: ppo_config.PPOConfig,
-               rollouts: Optional[Iterator[types.Rollout]] = None,
+               networks,
+               config,
+               batches: Optional[Iterator[types.SequenceBatch]] = None,
                key: Optional[jax.Array] = None):
     """Args:
-      networks: the policy/value networks to train.
-      config: hyper-parameters.
-      rollouts: where `step()` takes data from when it is given none.
+      networks: the networks to train (`HierarchyNetworks` or
+        `PolicyValueNetworks`).
+      config: hyper-parameters (`HierarchyConfig` or `PPOConfig`).
+      batches: where `step()` takes data from when it is given none.
       key: PRNG key; defaults to `PRNGKey(config.seed)`.
     """
-    optimizer = make_optimizer(config)
+    self._optimizer = step_size.make_optimizer(config)
     if key is None:
       key = jax.random.PRNGKey(config.seed)
-    self._state = make_initial_state(networks, optimizer, key)
-    self._update = jax.jit(make_update_fn(networks, config, optimizer))
-    self._rollouts = rollouts
+    self._state = make_initial_state(networks, self._optimizer, key)
+    self._update = jax.jit(make_update_fn(networks, config, self._optimizer))
+    self._batches = batches
 
   @property
   def state(self) -> TrainingState:
     """The current training state (a pytree of arrays)."""
     return self._state
 
-  def step(self, rollout: Optional[types.Rollout] = None) -> dict[str, Any]:
-    """One PPO iteration on `rollout`, or on the iterator's next one.
+  def step(self,
+           batch: Optional[types.SequenceBatch] = None) -> dict[str, Any]:
+    """One PPO update on `batch`, or on the iterator's next one.
 
     Returns the update's metrics (device scalars; `float()` them to log).
     """
-    if rollout is None:
-      if self._rollouts is None:
-        raise ValueError('PPOLearner.step() needs a rollout: pass one or '
-                         'give the learner a `rollouts` iterator.')
-      rollout = next(self._rollouts)
-    self._state, metrics = self._update(self._state, rollout)
+    if batch is None:
+      if self._batches is None:
+        raise ValueError(f'{type(self).__name__}.step() needs a batch: pass '
+                         'one or give the learner a `batches` iterator.')
+      batch = next(self._batches)
+    self._state, metrics = self._update(self._state, batch)
     return metrics
 
   def get_variables(self, names: Sequence[str]) -> list[Any]:
-    """Variables by name: 'params', 'normalizer' or 'step'."""
-    variables = {'params': self._state.params,
-                 'normalizer': self._state.normalizer,
-                 'step': self._state.step}
+    """Variables by name: 'params', 'normalizer', 'global_state_normalizer'
+    or 'update'."""
+    state = self._state
+    variables = {'params': state.params, 'normalizer': state.normalizer,
+                 'global_state_normalizer': state.global_state_normalizer,
+                 'update': state.update}
     unknown = [name for name in names if name not in variables]
     if unknown:
       raise ValueError(f'Unknown variable names {unknown}; expected some of '
@@ -222,13 +311,55 @@ class PPOLearner(core.Learner):
     return [variables[name] for name in names]
 
   def save(self, path: str) -> None:
-    """Writes the full training state to `path`, atomically (see
-    `agents.checkpointing`)."""
-    checkpointing.save_state(path, self._state, _CHECKPOINT_KIND,
+    """Writes the full training state to `path`, atomically."""
+    checkpointing.save_state(path, self._state, self.checkpoint_kind,
                              _CHECKPOINT_FORMAT)
 
+  def _upgrade(self, file_format: int,
+               state_dict: dict[str, Any]) -> dict[str, Any]:
+    """A state dict of one of the `older_formats` in today's layout (the
+    counter may keep its old name, `step`)."""
+    del file_format  # Format 1, the feed-forward learner's first layout.
+    # It had no value or global-state statistics: they start as identities.
+    return {**checkpointing.to_state_dict(self._state), **state_dict}
+
+  def _read_state_dict(self, path: str) -> dict[str, Any]:
+    """The state dict of a file written by `save`, in today's layout."""
+    file_format, state_dict = checkpointing.read(path, self.checkpoint_kind)
+    if file_format != _CHECKPOINT_FORMAT:
+      if file_format not in self.older_formats:
+        raise ValueError(
+            f'{path} is a {self.checkpoint_kind} checkpoint of format '
+            f'{file_format}; this version reads formats '
+            f'{[*self.older_formats, _CHECKPOINT_FORMAT]}.')
+      state_dict = self._upgrade(file_format, state_dict)
+      if 'step' in state_dict:
+        state_dict = {**state_dict, 'update': state_dict['step']}
+        del state_dict['step']
+    return state_dict
+
   def restore(self, path: str) -> None:
-    """Loads a file written by `save` with the same networks and config."""
-    self._state = checkpointing.restore_state(path, self._state,
-                                              _CHECKPOINT_KIND,
-                                              _CHECKPOINT_FORMAT)
+    """Loads a file written by `save` with the same networks and config
+    (or an older format that `_upgrade` reads)."""
+    self._state = checkpointing.from_state_dict(
+        path, self._state, self._read_state_dict(path))
+
+  # What a curriculum stage hands on (`initialize_from`); the rest (optimiser,
+  # update counter, key and the global-state statistics, whose size depends
+  # on the population) starts fresh.
+  _HANDED_ON = ('params', 'normalizer', 'value_normalizer')
+
+  def initialize_from(self, path: str) -> None:
+    """Starts from another run's file written by `save` (e.g. a curriculum
+    stage): its parameters and its observation and value statistics, with
+    this learner's fresh optimiser, update counter and PRNG key.
+
+    Raises:
+      ValueError: the file is of another kind (variant), or its networks
+        differ from this learner's (naming the file).
+    """
+    state_dict = self._read_state_dict(path)
+    template = {name: getattr(self._state, name) for name in self._HANDED_ON}
+    loaded = checkpointing.from_state_dict(
+        path, template, {name: state_dict[name] for name in self._HANDED_ON})
+    self._state = self._state._replace(**loaded)

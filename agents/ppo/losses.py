@@ -29,7 +29,7 @@ def compute_gae(
     values: [T, B] value estimates V_t of the observation before step t.
     discounts: [T, B] d_t = gamma * (1 - terminated_t): 0 cuts both the
       bootstrap and the trace at an episode's end. Truncated episodes are the
-      caller's business (see `types.Rollout.truncation`).
+      caller's business (see `types.SequenceBatch.truncation`).
     bootstrap_value: [B] V_T, the value after the last step.
     lambda_: GAE lambda in [0, 1].
 

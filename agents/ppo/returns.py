@@ -62,7 +62,7 @@ def compute_targets(
     rewards: [T, B] rewards, already scaled.
     discounts: [T, B] gamma x the environment's 0/1 discount.
     truncation: optional [T, B], 1 where the episode was cut by a time limit
-      (see `types.Rollout.truncation`).
+      (see `types.SequenceBatch.truncation`).
     value_normalizer: [1]-dimensional return statistics, or None for a critic
       that predicts returns directly.
     gae_lambda: GAE lambda.

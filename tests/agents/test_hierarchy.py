@@ -3,6 +3,7 @@ import collections
 import functools
 import os
 
+from flax import serialization
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -11,7 +12,7 @@ import pytest
 from agents import normalization
 from agents.hierarchy import builder as hierarchy_builder
 from agents.hierarchy import config as hierarchy_config
-from agents.hierarchy import types
+from agents.ppo import types
 
 TimeStep = collections.namedtuple(
     'TimeStep', ['step_type', 'reward', 'discount', 'observation'])
@@ -51,18 +52,18 @@ def _random_batch(agent, seed=0):
 @pytest.mark.parametrize('agent', hierarchy_config.AGENTS)
 def test_updates_move_every_parameter_and_stay_finite(agent):
   _, _, learner = _setup(agent)
-  before, step = learner.get_variables(['params', 'step'])
+  before, update = learner.get_variables(['params', 'update'])
   for seed in range(2):
     metrics = learner.step(_random_batch(agent, seed))
     for name, value in metrics.items():
       assert np.isfinite(value), (agent, name)
-  after, normalizer, gs_normalizer, step_after = learner.get_variables(
-      ['params', 'normalizer', 'global_state_normalizer', 'step'])
+  after, normalizer, gs_normalizer, update_after = learner.get_variables(
+      ['params', 'normalizer', 'global_state_normalizer', 'update'])
   unchanged = [jax.tree_util.keystr(path) for path, a, b in zip(
       *zip(*jax.tree_util.tree_leaves_with_path(before)),
       jax.tree.leaves(after)) if np.array_equal(a, b)]
   assert not unchanged, unchanged
-  assert int(step_after) == int(step) + 2
+  assert int(update_after) == int(update) + 2
   assert float(normalizer.count) >= 2 * T * B
   assert float(gs_normalizer.count) == (
       float(normalizer.count) if agent == 'mappo' else 0.0)
@@ -172,7 +173,7 @@ def test_mappo_critic_reads_the_global_state_and_the_policy_does_not():
 
 
 @pytest.mark.parametrize('agent, other', [('mappo', 'hrl'), ('hrl', 'flat')])
-def test_save_restore_round_trips_and_the_step_counter_continues(
+def test_save_restore_round_trips_and_the_update_counter_continues(
     tmp_path, agent, other):
   _, _, learner = _setup(agent)
   learner.step(_random_batch(agent, 5))
@@ -190,9 +191,18 @@ def test_save_restore_round_trips_and_the_step_counter_continues(
   for a, b in zip(jax.tree.leaves(after_saved),
                   jax.tree.leaves(learner.state)):
     np.testing.assert_array_equal(a, b)
-  assert int(learner.state.step) == int(saved.step) + 1
+  assert int(learner.state.update) == int(saved.update) + 1
   with pytest.raises(ValueError, match=f'not a hierarchy/{other} checkpoint'):
     _setup(other)[2].restore(path)
+  # Format 2, the hierarchy learner's own: the counter named `step`.
+  state = serialization.to_state_dict(saved)
+  state['step'] = state.pop('update')
+  with open(path, 'wb') as f:
+    f.write(serialization.msgpack_serialize(
+        {'format': 2, 'kind': f'hierarchy/{agent}', 'state': state}))
+  learner.restore(path)
+  for a, b in zip(jax.tree.leaves(saved), jax.tree.leaves(learner.state)):
+    np.testing.assert_array_equal(a, b)
 
 
 def test_bad_batches_and_configs_are_rejected_with_clear_errors():

@@ -1,7 +1,9 @@
-"""PPOLearner: one update, checkpoints, and a bandit it must solve."""
+"""PPOLearner on feed-forward networks: one update, checkpoints, and a bandit
+it must solve."""
 import collections
 import os
 
+from flax import serialization
 import jax
 import numpy as np
 import pytest
@@ -19,7 +21,7 @@ def _random_rollout(seed=0, with_truncation=True):
   f32 = lambda *shape: rng.normal(size=shape).astype(np.float32)
   discount = (rng.uniform(size=(T, B)) > 0.2).astype(np.float32)
   truncation = ((rng.uniform(size=(T, B)) > 0.9) * discount).astype(np.float32)
-  return types.Rollout(
+  return types.SequenceBatch(
       observation=f32(T + 1, B, OBS_DIM) * 3 + 1,
       raw_action=f32(T, B, ACTION_DIM),
       log_prob=f32(T, B) - 2, reward=f32(T, B), discount=discount,
@@ -40,11 +42,11 @@ def test_one_update_is_finite_and_changes_parameters():
   metrics = learner.step()  # Takes the iterator's rollout.
   for name, value in metrics.items():
     assert np.isfinite(value), name
-  after, normalizer, step = learner.get_variables(
-      ['params', 'normalizer', 'step'])
+  after, normalizer, update = learner.get_variables(
+      ['params', 'normalizer', 'update'])
   changed = jax.tree.map(lambda a, b: not np.array_equal(a, b), before, after)
   assert all(jax.tree.leaves(changed))
-  assert int(step) == 1 and float(normalizer.count) == T * B
+  assert int(update) == 1 and float(normalizer.count) == T * B
 
 
 def test_bad_requests_are_rejected_with_clear_errors():
@@ -53,7 +55,7 @@ def test_bad_requests_are_rejected_with_clear_errors():
     _make_learner(num_minibatches=3).step(_random_rollout())
   with pytest.raises(ValueError, match='Unknown variable'):
     learner.get_variables(['weights'])
-  with pytest.raises(ValueError, match='needs a rollout'):
+  with pytest.raises(ValueError, match='needs a batch'):
     learner.step()
 
 
@@ -70,7 +72,7 @@ def test_save_restore_round_trips_exactly(tmp_path):
   learner.restore(path)
   for a, b in zip(jax.tree.leaves(saved), jax.tree.leaves(learner.state)):
     np.testing.assert_array_equal(a, b)
-  assert int(learner.state.step) == 1
+  assert int(learner.state.update) == 1
   # Restored state, same data: training continues identically.
   learner.step(_random_rollout(1))
   for a, b in zip(jax.tree.leaves(after_saved), jax.tree.leaves(learner.state)):
@@ -82,6 +84,18 @@ def test_save_restore_round_trips_exactly(tmp_path):
     np.testing.assert_array_equal(a, b)
   with pytest.raises(ValueError, match='other shapes'):
     _make_learner(policy_hidden=(8,)).restore(path)
+
+  # Format 1, the feed-forward learner's own: no value or global-state
+  # statistics, the counter named `step`.
+  state = serialization.to_state_dict(saved)
+  state['step'] = state.pop('update')
+  del state['value_normalizer'], state['global_state_normalizer']
+  with open(path, 'wb') as f:
+    f.write(serialization.msgpack_serialize(
+        {'format': 1, 'kind': 'ppo', 'state': state}))
+  other.restore(path)
+  for a, b in zip(jax.tree.leaves(saved), jax.tree.leaves(other.state)):
+    np.testing.assert_array_equal(a, b)
 
 
 TimeStep = collections.namedtuple(

@@ -13,7 +13,7 @@ from agents import checkpointing
 from agents import normalization
 from agents.hierarchy import builder as hierarchy_builder
 from agents.hierarchy import config as hierarchy_config
-from agents.hierarchy import types
+from agents.ppo import types
 from agents.ppo import losses
 from agents.ppo import returns
 from agents.ppo import step_size
@@ -200,6 +200,7 @@ def _write_format_1(path, learner):
   """A file as the first layout's learner wrote it: no value statistics."""
   state = serialization.to_state_dict(jax.device_get(learner.state))
   del state['value_normalizer']
+  state['step'] = state.pop('update')
   data = serialization.msgpack_serialize(
       {'format': 1, 'kind': 'hierarchy/hrl', 'state': state})
   with open(path, 'wb') as f:
@@ -230,7 +231,7 @@ def test_first_layout_checkpoints_load_with_the_same_policy_and_values(
   np.testing.assert_allclose(
       normalization.denormalize(new.state.value_normalizer, value[..., None])
       [..., 0], old_value, rtol=1e-6)
-  assert int(new.state.step) == 1
+  assert int(new.state.update) == 1
   new.step(batch)  # And it trains on.
   with open(path, 'rb') as f:
     contents = serialization.msgpack_restore(f.read())
