@@ -2,9 +2,17 @@
 
 Layout, one concept per module:
   core.py           Actor / Learner / VariableSource interfaces.
-  normalization.py  running observation statistics saved with the weights.
-  networks/         Flax MLP torso, tanh-Gaussian head, policy/value networks.
-  ppo/              config, losses, learner, actor and the builder wiring them.
+  checkpointing.py  atomic learner checkpoint files (kind, format, state).
+  normalization.py  running statistics (observations, global state, values).
+  observations.py   observation dicts -> the flat vectors the networks read.
+  networks/         Flax MLP torso, tanh-Gaussian head, feed-forward
+                    policy/value networks.
+  ppo/              the one PPO learner (recurrent; feed-forward = without
+                    memory), its losses, returns, step size, data types, and
+                    the lower layer's config, actor and builder.
+  hierarchy/        the cooperative agent: upper and middle layer, variants.
+  lowlevel/         the frozen lower layer (pretrained walker) and the
+                    CommandWrapper that steps it.
 
 Importing `agents` is cheap: submodules import JAX only when they are imported.
 """

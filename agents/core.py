@@ -8,11 +8,10 @@ way: actors step environments and pull parameters from a `VariableSource`
 Deviation from Acme: Acme's `Saveable.save()` returns an in-memory state and a
 separate TensorFlow Checkpointer writes it. We have no Checkpointer, so
 `save(path)` / `restore(path)` take a file path and the learner writes the file
-itself (atomically, see `agents.ppo.learning`).
+itself (atomically, see `agents.checkpointing`).
 """
 import abc
-import itertools
-from typing import Any, Optional, Sequence
+from typing import Any, Sequence
 
 
 class VariableSource(abc.ABC):
@@ -65,13 +64,7 @@ class Learner(VariableSource):
 
   @abc.abstractmethod
   def step(self) -> Any:
-    """Performs one learning update (for PPO: one rollout, all epochs)."""
-
-  def run(self, num_steps: Optional[int] = None) -> None:
-    """Calls `step()` `num_steps` times, or forever when `num_steps` is None."""
-    iterator = range(num_steps) if num_steps is not None else itertools.count()
-    for _ in iterator:
-      self.step()
+    """Performs one learning update (for PPO: one batch, all epochs)."""
 
   def save(self, path: str) -> None:
     """Writes everything needed to resume training to `path`."""

@@ -81,16 +81,13 @@ class EnvSpec:
   n_agents: int
   options: Mapping[str, Any]
   """Extra `coop_suite.load` options (time_limit, stage, n_pushers...)."""
-  agent: str
-  """'flat' steps joints; every other variant steps commands."""
+  uses_commands: bool
+  """`HierarchyConfig.uses_commands`: the policy commands the lower layer
+  (False: 'flat', which steps joints)."""
   command_period: float
   controller_files: Optional[Mapping[str, bytes]] = dataclasses.field(
       default=None, repr=False)
-  """From `read_controller`; unused (may be None) for 'flat'."""
-
-  @property
-  def uses_commands(self) -> bool:
-    return self.agent != 'flat'
+  """From `read_controller`; unused (may be None) without commands."""
 
   def make(self, seed: int, wrap_raw: Optional[Callable[[Any], Any]] = None):
     """One copy with environment seed `seed`.
@@ -106,7 +103,7 @@ class EnvSpec:
     if not self.uses_commands:
       return FlatEnv(env)
     if self.controller_files is None:
-      raise ValueError(f"agent={self.agent!r} needs a lower-layer controller.")
+      raise ValueError('Commands need a lower-layer controller.')
     from agents.lowlevel import wrapper  # pylint: disable=g-import-not-at-top
     return wrapper.CommandWrapper(
         env, controller_from_files(self.controller_files),
@@ -211,8 +208,8 @@ def species_layout(env, config) -> list[Species]:
     size = int(sum(obs_lib.observation_sizes(observation_spec[agents[0]],
                                              keys)))
     spec = action_spec[agents[0]]
-    bounds = (None if config.agent == 'flat' else
-              (float(np.min(spec.minimum)), float(np.max(spec.maximum))))
+    bounds = ((float(np.min(spec.minimum)), float(np.max(spec.maximum)))
+              if config.uses_commands else None)
     global_size = None
     if config.uses_global_state:
       global_size = len(env.task.global_state(env.physics)) + size

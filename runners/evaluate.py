@@ -96,13 +96,13 @@ def load_model(path: str, args: EvalArgs):
       train, **{k: v for k, v in overrides.items() if v})
   config = hierarchy_config.HierarchyConfig(**state['agent_config'])
   files = None
-  if train.agent != 'flat':
+  if config.uses_commands:
     copy = os.path.join(checkpoints.run_directory(checkpoint), 'controller')
     files = envs_lib.read_controller(
         train.paradigm, args.controller or (
             copy if os.path.exists(os.path.join(copy, 'config.json')) else ''))
   spec = envs_lib.EnvSpec(train.task, train.n_agents, train.env_options(),
-                          train.agent, train.command_period, files)
+                          config.uses_commands, train.command_period, files)
   models = {}
   for saved in state['species']:
     species = envs_lib.Species(**{**saved, 'agents': tuple(saved['agents']),

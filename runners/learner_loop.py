@@ -77,12 +77,13 @@ def environment_spec(args: config_lib.TrainArgs) -> envs_lib.EnvSpec:
   """The run's environments, with its lower layer (the run's copy when
   resuming); writes nothing."""
   files = None
-  if args.agent != 'flat':
+  uses_commands = config_lib.hierarchy_config(args).uses_commands
+  if uses_commands:
     files = envs_lib.read_controller(
         args.paradigm, _controller_copy(args) if _has_controller_copy(args)
         else args.controller)
   return envs_lib.EnvSpec(args.task, args.n_agents, args.env_options(),
-                          args.agent, args.command_period, files)
+                          uses_commands, args.command_period, files)
 
 
 def probe(spec: envs_lib.EnvSpec, config):

@@ -5,12 +5,13 @@ steps with T = 1; the learner replays whole sequences with T > 1. Because
 both run this one module, acting and learning see the same function.
 """
 import functools
-from typing import Optional, Sequence
+from typing import Optional
 
 import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
+from agents.hierarchy import config as hierarchy_config
 from agents.networks import mlp
 
 # A small last layer starts the policy close to its prior, whatever the input
@@ -38,8 +39,8 @@ class ResettingGRUCell(nn.Module):
 class MiddleLayer(nn.Module):
   """The ML: a GRU scanned over the T commands of a sequence.
 
-  `recurrent=False` ('no_memory') replaces the GRU by one Dense layer of the
-  same width and passes the carry through untouched, so the interface (and
+  `recurrent=False` (`HierarchyConfig.recurrent`, 'no_memory') replaces the
+  GRU by one Dense layer of the same width and passes the carry through untouched, so the interface (and
   the learner's code path) stays the same.
   """
   hidden_size: int
@@ -77,16 +78,8 @@ class HierarchyPolicyValue(nn.Module):
   The policy's parameter names are those of every earlier layout, so older
   checkpoints' policies load into any critic structure.
   """
-  agent: str
+  config: hierarchy_config.HierarchyConfig
   action_size: int
-  upper_layer_sizes: Sequence[int]
-  middle_layer_size: int
-  head_sizes: Sequence[int]
-  critic_sizes: Sequence[int]
-  flat_sizes: Sequence[int]
-  activation: str = 'swish'
-  state_dependent_std: bool = False
-  critic: str = 'separate'
 
   @nn.compact
   def __call__(self, carry, observation, reset,
@@ -103,44 +96,45 @@ class HierarchyPolicyValue(nn.Module):
     Returns:
       (carry [B, C] after step T - 1, dist_params [T, B, 2A], value [T, B]).
     """
-    head_outputs = (2 * self.action_size if self.state_dependent_std
+    config = self.config
+    head_outputs = (2 * self.action_size if config.state_dependent_std
                     else self.action_size)
-    mlp_ = functools.partial(mlp.MLP, activation=self.activation)
+    mlp_ = functools.partial(mlp.MLP, activation=config.activation)
 
     def trunk(prefix, carry):  # UL + ML -> (carry, features [T, B, H]).
-      features = mlp_(self.upper_layer_sizes, activate_final=True,
+      features = mlp_(config.upper_layer_sizes, activate_final=True,
                       name=f'{prefix}upper_layer')(observation)
       return MiddleLayer(
-          self.middle_layer_size, recurrent=self.agent != 'no_memory',
-          activation=self.activation, name=f'{prefix}middle_layer')(
+          config.middle_layer_size, recurrent=config.recurrent,
+          activation=config.activation, name=f'{prefix}middle_layer')(
               carry, features, reset)
 
-    if self.agent == 'flat':
-      policy_out = mlp_((*self.flat_sizes, head_outputs),
+    if not config.uses_commands:
+      policy_out = mlp_((*config.flat_sizes, head_outputs),
                         final_kernel_scale=_POLICY_HEAD_SCALE,
                         name='policy')(observation)
-      value = mlp_((*self.flat_sizes, 1), name='value')(observation)
+      value = mlp_((*config.flat_sizes, 1), name='value')(observation)
     else:
-      size = self.middle_layer_size
+      size = config.middle_layer_size
       policy_carry, features = trunk('', carry[:, :size])
-      policy_out = mlp_((*self.head_sizes, head_outputs),
+      policy_out = mlp_((*config.head_sizes, head_outputs),
                         final_kernel_scale=_POLICY_HEAD_SCALE,
                         name='command_head')(features)
-      if self.critic == 'separate':
+      if config.critic == 'separate':
         critic_carry, critic_features = trunk('critic_', carry[:, size:])
         carry = jnp.concatenate([policy_carry, critic_carry], -1)
       else:
         carry = policy_carry
         critic_features = (jax.lax.stop_gradient(features)
-                           if self.critic == 'stop_gradient' else features)
-      if self.agent == 'mappo':
+                           if config.critic == 'stop_gradient' else features)
+      if config.uses_global_state:
         if global_state is None:
           raise ValueError("agent='mappo' needs a global_state input.")
         critic_features = jnp.concatenate([critic_features, mlp_(
-            self.critic_sizes, activate_final=True,
+            config.critic_sizes, activate_final=True,
             name='global_state_encoder')(global_state)], -1)
-      value = mlp_((*self.head_sizes, 1), name='value_head')(critic_features)
-    if self.state_dependent_std:
+      value = mlp_((*config.head_sizes, 1), name='value_head')(critic_features)
+    if config.state_dependent_std:
       dist_params = policy_out
     else:
       # Pre-softplus scale, learned but shared by all states (see config).

@@ -79,16 +79,8 @@ def make_hierarchy_networks(
       raise ValueError("agent='mappo' needs global_state_dim.")
   else:
     global_state_dim = None
-  module = modules.HierarchyPolicyValue(
-      agent=config.agent, action_size=action_dim,
-      upper_layer_sizes=config.upper_layer_sizes,
-      middle_layer_size=config.middle_layer_size,
-      head_sizes=config.head_sizes, critic_sizes=config.critic_sizes,
-      flat_sizes=config.flat_sizes, activation=config.activation,
-      state_dependent_std=config.state_dependent_std, critic=config.critic)
-  # A separate critic carries its own middle-layer state after the policy's.
-  carry_size = config.middle_layer_size * (
-      2 if config.critic == 'separate' and config.agent != 'flat' else 1)
+  module = modules.HierarchyPolicyValue(config=config, action_size=action_dim)
+  carry_size = config.carry_size
 
   def initial_carry(batch_size: int) -> jax.Array:
     return jnp.zeros((batch_size, carry_size), jnp.float32)

@@ -142,10 +142,6 @@ class Controller:
       flat = obs_lib.flatten_agents(observations, self.observation_keys)
     return self._run(flat)
 
-  def act_flat(self, observation: np.ndarray) -> np.ndarray:
-    """Flat observations [B, D] (in `observation_keys` order) -> [B, 8]."""
-    return self._run(np.asarray(observation, np.float32))
-
   def _run(self, flat):
     if flat.shape[-1] != self.observation_size:
       raise ValueError(f'Expected {self.observation_size} features, got '
