@@ -17,7 +17,8 @@ One iteration (version v):
 
 The run lasts ceil(total_steps / nominal steps per iteration) iterations,
 nominal = actors x envs_per_actor x sequence_length x low-level steps per
-command. Ctrl-C / SIGTERM stop after the current iteration with a
+command; a resumed run collects what is left of total_steps at its own
+batch size. Ctrl-C / SIGTERM stop after the current iteration with a
 checkpoint; `--resume` continues from the newest one.
 """
 import dataclasses
@@ -199,7 +200,10 @@ def _train(args, checkpoint, on_iteration):
       dataclasses.asdict(config)), 'species': [s.to_dict() for s in layout]}
   per_iteration = (args.num_actors * args.envs_per_actor
                    * config.sequence_length * per_action)
-  iterations = math.ceil(args.total_steps / per_iteration)
+  # What is left of the budget, at today's batch size (a resumed run may
+  # collect more or less per iteration than before).
+  iterations = counters['iteration'] + math.ceil(
+      max(0, args.total_steps - counters['env_steps']) / per_iteration)
   n_agents = sum(len(s.agents) for s in layout)
 
   log = run_dir.MetricsLog(

@@ -4,8 +4,13 @@ import os
 import time
 
 import psutil
+import pytest
 
 from runners import actor_pool
+
+# Ray starts its processes with fork + exec, which JAX's fork warning cannot
+# tell from a bare fork.
+pytestmark = pytest.mark.filterwarnings('ignore:os.fork:RuntimeWarning')
 
 
 def _listening(pids):

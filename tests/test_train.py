@@ -338,3 +338,15 @@ def test_init_from_refuses_what_does_not_fit(controller, ravine_stages,
                init_from=(f'pusher={ravine_stages["pusher"]}',), **joint)
   with pytest.raises(ValueError, match='pusher.msgpack.*(structure|shapes)'):
     learner_loop.initialize_from_runs(args, _joint_learners(args))
+
+
+def test_resume_at_another_batch_size_keeps_the_step_budget(controller,
+                                                             tmp_path):
+  logdir = tmp_path / 'run'
+  learner_loop.train(_args(logdir, controller, total_steps=2 * STEPS))
+  # One copy instead of two: half the steps per iteration; 16 steps left.
+  learner_loop.train(_args(logdir, controller, total_steps=3 * STEPS,
+                           envs_per_actor=1, resume=True))
+  rows = _rows(logdir)
+  assert [int(r['env_steps']) for r in rows] == [
+      STEPS, 2 * STEPS, 2 * STEPS + STEPS // 2, 3 * STEPS]
