@@ -226,7 +226,15 @@ def _prepare_logdir(args: Args) -> bool:
 
 
 def train(args: Args) -> dict[str, Any]:
-  """Runs (or resumes) the pretraining; returns the last logged row."""
+  """Runs (or resumes) the pretraining; returns the last logged row.
+
+  One writer per run directory (`run_dir.RunLock`), as `coop-train`.
+  """
+  with run_dir.RunLock(args.logdir):
+    return _train(args)
+
+
+def _train(args: Args) -> dict[str, Any]:
   from agents.ppo import builder as ppo_builder  # pylint: disable=g-import-not-at-top
 
   resuming = _prepare_logdir(args)
@@ -327,7 +335,10 @@ def _loop(args, envs, actor, learner, log, counters, stop):
 
 def main(argv=None):
   args = cli.parse(Args, argv, description=__doc__.splitlines()[0])
-  row = train(args)
+  try:
+    row = train(args)
+  except cli.user_errors() as e:
+    cli.fail('coop-pretrain-lowlevel', e)
   print(json.dumps({k: row.get(k) for k in ('update', 'env_steps', 'return')}))
   print(f'controller: {args.export_dir}')
 

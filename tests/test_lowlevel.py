@@ -17,6 +17,7 @@ from agents import lowlevel
 from agents import observations as obs_lib
 from agents.lowlevel import controller as controller_lib
 from runners import pretrain_locomotion
+from runners import run_dir
 from runners import vector_env
 
 TINY = ['--num-envs', '8', '--unroll-length', '8', '--num-workers', '0',
@@ -110,7 +111,7 @@ def tiny_run(tmp_path_factory):
   return logdir, first_rows, checkpoints_before
 
 
-def test_pretrain_writes_metrics_checkpoints_and_resumes(tiny_run):
+def test_pretrain_writes_metrics_checkpoints_and_resumes(tiny_run, capsys):
   logdir, first_rows, checkpoints_before = tiny_run
   assert [int(r['env_steps']) for r in first_rows] == [64, 128]
   assert checkpoints_before == ['ckpt_00000001.json', 'ckpt_00000001.msgpack',
@@ -130,12 +131,19 @@ def test_pretrain_writes_metrics_checkpoints_and_resumes(tiny_run):
   assert config['training']['env_steps'] == 192
   assert config['env_config']['resample_on_reach'] is False
   assert any(n.startswith('events.out.tfevents') for n in os.listdir(logdir))
-  with pytest.raises(FileExistsError, match='--resume'):
-    pretrain_locomotion.main(['--paradigm', 'position', '--logdir', logdir,
-                              *TINY, '--total-env-steps', '64'])
-  with pytest.raises(ValueError, match='differs'):
-    pretrain_locomotion.main(['--paradigm', 'position', '--logdir', logdir,
-                              *TINY, '--resume', '--learning-rate', '1e-3'])
+  argv = ['--paradigm', 'position', '--logdir', logdir, *TINY]
+  cases = [(['--total-env-steps', '64'], '--resume'),
+           (['--resume', '--learning-rate', '1e-3'], 'differs')]
+  for more, match in cases:
+    with pytest.raises(SystemExit) as exit_info:
+      pretrain_locomotion.main(argv + more)
+    assert exit_info.value.code == 2
+    assert match in capsys.readouterr().err
+  # One writer per run directory, as coop-train.
+  with run_dir.RunLock(logdir):
+    with pytest.raises(SystemExit):
+      pretrain_locomotion.main(argv + ['--resume', '--total-env-steps', '256'])
+  assert 'being written by another run' in capsys.readouterr().err
 
 
 def test_export_only_writes_the_newest_checkpoint_with_its_metrics(
