@@ -207,7 +207,8 @@ def evaluate_cell(cell: paper_plan.Cell, checkpoint: str, args: PaperArgs,
     result = evaluate.evaluate(evaluate.EvalArgs(
         checkpoint=(checkpoint,), episodes=args.episodes,
         seeds=(args.eval_seed,), envs=args.eval_envs,
-        n_agents=0 if n == cell.n_agents else n), log=log)
+        n_agents=0 if n == cell.n_agents else n),
+        log=lambda line, n=n: log(f'{cell.path} with {n}: {line}'))
     model = result['models'][0]
     out[n] = {
         'cell': cell.name, 'experiment': cell.experiment, 'task': cell.task,

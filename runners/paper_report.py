@@ -16,6 +16,9 @@ from runners import evaluate
 from runners import paper
 from runners import paper_plan
 
+INTRODUCTION = ('The plan of docs/paper.md, regenerated from the committed '
+                '`results/paper/` with `coop-paper --report --docs '
+                'docs/results.md`.')
 SCALING_SEEDS = 3
 """Fig. 4a's models per population."""
 BEGIN, END = '<!-- paper:begin -->', '<!-- paper:end -->'
@@ -77,12 +80,20 @@ def _ours(summary, metric='success') -> list[str]:
             f'0/{summary["declared"]}', '']
   scale = 100 if metric == 'success' else 1
   spread = summary[f'{metric}_spread'] * scale
-  steps = '/'.join(f'{s / 1e6:.3g}M' for s in summary['env_steps'])
+  steps = '/'.join(_steps(s) for s in summary['env_steps'])
   return [_rate(summary[metric] * scale, summary[f'{metric}_se'] * scale)
           if metric == 'success' else
           f'{summary[metric]:.0f} +- {summary[f"{metric}_se"]:.0f}',
           f'+- {spread:.1f}' if summary['models'] > 1 else '',
           f'{summary["models"]}/{summary["declared"]}', steps]
+
+
+def _steps(count: int) -> str:
+  """Environment steps as 20M, 5.12k or 16."""
+  for scale, unit in ((1e6, 'M'), (1e3, 'k')):
+    if count >= scale:
+      return f'{count / scale:.3g}{unit}'
+  return str(count)
 
 
 def _reference(references, task, n_agents, policy) -> str:
@@ -160,12 +171,13 @@ def report(args: paper.PaperArgs, plan=None) -> str:
             f'then `coop-eval --checkpoint {args.results}/<cell> --episodes '
             f'{args.episodes} --seeds {args.eval_seed}` (`--n-agents N` for '
             'the zero-shot populations) on its final checkpoint.', '',
-            '```']
+            f'<details><summary>The {len(plan)} cells\' commands</summary>',
+            '', '```']
   for cell in plan:
     done = 'done' if paper.is_done(cell, args) else 'not run'
     lines.append(f'# {cell.path} ({done})')
     lines.append(paper.command(cell, args))
-  lines += ['```', '']
+  lines += ['```', '', '</details>', '']
   return '\n'.join(lines)
 
 
@@ -242,7 +254,7 @@ def write_block(path: str, text: str) -> None:
     document = head + block + rest.partition(END)[2]
   else:
     document = (document.rstrip('\n') + '\n\n## The paper\'s experiments\n\n'
-                + block + '\n')
+                + INTRODUCTION + '\n\n' + block + '\n')
   tmp = f'{path}.tmp-{os.getpid()}'
   with open(tmp, 'w') as f:
     f.write(document)
