@@ -55,6 +55,7 @@ setuptools.setup(
             "coop-pretrain-lowlevel=runners.pretrain_locomotion:main",
             "coop-train=runners.train:main",
             "coop-eval=runners.evaluate:main",
+            "coop-paper=runners.paper:main",
         ],
     },
 )

@@ -65,6 +65,25 @@ def parse(cls, argv=None, description=None):
     parser.error(str(e))  # Usage and one line naming the flag; exit 2.
 
 
+def command_line(instance, prog: str, skip=()) -> str:
+  """The inverse of `parse`: `prog` with the flags of the fields of the
+  dataclass `instance` that differ from their defaults (`skip` names fields
+  left out), e.g. 'coop-train --task ravine --n-agents 2'."""
+  words = [prog]
+  for field in dataclasses.fields(instance):
+    value = getattr(instance, field.name)
+    if field.name in skip or value == field.default:
+      continue
+    flag = '--' + field.name.replace('_', '-')
+    if isinstance(value, bool):
+      words.append(flag if value else '--no-' + flag[2:])
+    elif isinstance(value, tuple):
+      words += [flag, *map(str, value)]
+    else:
+      words += [flag, str(value)]
+  return ' '.join(words)
+
+
 def user_errors():
   """Exceptions that are the user's to fix (a flag, a path, a busy or
   damaged run directory, a Ray cluster it cannot join): a CLI prints them

@@ -3,6 +3,7 @@
     coop-eval --checkpoint runs/transport_hrl_n4_s0 --episodes 100 --seeds 0 1 2
     coop-eval --checkpoint runs/m0 runs/m1 runs/m2 --n-agents 6   # zero-shot
     coop-eval --checkpoint runs/transport_hrl_n4_s0 --video transport.mp4
+    coop-eval --checkpoint runs/m0 runs/m1 --seeds 1000 --json eval.json
 
 `--checkpoint` takes run directories (their newest checkpoint) or checkpoint
 directories; several are several trained models (the paper: 5 models x 100
@@ -15,7 +16,8 @@ models x seeds x episodes (and, for several models, the spread between
 models). The task and agent count default to the training ones; any other
 count works (one policy per species, fixed-size exteroception). `--video`
 films one episode (first model, first seed) headless, one frame per control
-step, with `coop_suite.camera.FramingCamera`.
+step, with `coop_suite.camera.FramingCamera`. `--json` writes every
+episode's figures in marl-eval's layout (`runners.marl_eval`).
 """
 import dataclasses
 import json
@@ -25,6 +27,7 @@ import sys
 import numpy as np
 
 from runners import cli
+from runners import marl_eval
 
 os.environ.setdefault('MUJOCO_GL', 'egl')
 
@@ -58,6 +61,9 @@ class EvalArgs:
   weights)."""
   video: str = ''
   """mp4 file to film one episode into; empty for none."""
+  json: str = ''
+  """Also write every episode's figures to this file in marl-eval's JSON
+  layout (runners.marl_eval; docs/training.md, "Evaluation")."""
   width: int = 640
   height: int = 480
 
@@ -238,10 +244,12 @@ def mean_and_error(values):
 
 
 def evaluate(args: EvalArgs, log=None) -> dict:
-  """Plays every model x seed; returns the figures that `main` prints.
+  """Plays every model x seed; returns the figures that `main` prints,
+  and under 'models' each model's episodes (`metrics.episode_figures`).
 
   `log(line)` hears the progress (one line per model and seed).
   """
+  from runners import metrics as metrics_lib  # pylint: disable=g-import-not-at-top
   log = log or (lambda line: None)
   per_model, episodes, description = [], [], None
   filmed = None
@@ -261,7 +269,13 @@ def evaluate(args: EvalArgs, log=None) -> dict:
                       'iteration': state['iteration'],
                       'env_steps': state['env_steps'],
                       'success': float(np.mean([e['success']
-                                                for e in played]))})
+                                                for e in played])),
+                      'task': spec.task, 'n_agents': spec.n_agents,
+                      'stage': spec.options.get('stage', ''),
+                      'agent': config.agent,
+                      'seed': state['args']['seed'],
+                      'episodes': [metrics_lib.episode_figures(e)
+                                   for e in played]})
     if args.video and len(per_model) == 1:
       filmed = film(spec, config, models, args.seeds[0], args.video,
                     (args.width, args.height), not args.stochastic)[1]
@@ -301,6 +315,20 @@ def main(argv=None):
           f'{"succeeded" if out["filmed_success"] else "failed"})')
   print(json.dumps({k: out[k] for k in ('success', 'success_se', 'return',
                                          'return_se', 'episodes')}))
+  if args.json:
+    write_json(args.json, marl_eval.layout(out['models']))
+    print(f'marl-eval JSON: {args.json}')
+
+
+def write_json(path: str, data) -> None:
+  """Writes `data` as JSON to `path` whole (a temporary file renamed into
+  place), creating its folder."""
+  os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+  tmp = f'{path}.tmp-{os.getpid()}'
+  with open(tmp, 'w') as f:
+    json.dump(data, f, indent=1)
+    f.write('\n')
+  os.replace(tmp, path)
 
 
 if __name__ == '__main__':

@@ -27,11 +27,17 @@ COUNTERS = ('update', 'env_steps', 'agent_steps', 'wall_time', 'sps',
 _SKIP = ('env', 'control_steps')  # Per-episode bookkeeping, not figures.
 
 
+def episode_figures(metrics: dict[str, Any]) -> dict[str, float]:
+  """The numeric figures of one ended episode (an `episode_metrics()` dict,
+  with or without the rollout's bookkeeping) as floats: success is 0 / 1."""
+  return {k: float(v) for k, v in metrics.items() if k not in _SKIP
+          and isinstance(v, (bool, int, float, np.number, np.bool_))}
+
+
 def episode_keys(metrics: dict[str, Any]) -> list[str]:
   """Numeric episode figures of one `episode_metrics()` dict, in log order:
   return, success, reward terms, then the task's progress figures."""
-  keys = [k for k, v in metrics.items() if k not in _SKIP
-          and isinstance(v, (bool, int, float, np.number, np.bool_))]
+  keys = list(episode_figures(metrics))
   head = [k for k in ('return', 'success') if k in keys]
   terms = sorted(k for k in keys if k.startswith('reward/'))
   rest = sorted(k for k in keys if k not in head and k not in terms)

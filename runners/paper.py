@@ -1,0 +1,335 @@
+"""Runs the paper's experiment plan cell by cell: `coop-paper`.
+
+    coop-paper --dry-run                      # the plan, each cell's status
+    coop-paper                                # train + evaluate what is missing
+    coop-paper --only transport/hrl --budget 200000   # a quick subset
+    coop-paper --report --docs docs/results.md        # the tables, no training
+
+The plan (`runners.paper_plan.PLAN`) is data: task x variant x population x
+seed, with budgets and flags. A cell is done when `--results`/<cell>/ holds
+its metrics.csv, its final checkpoint (with the lower layer it was trained
+with) and one `eval_n<N>.json` per evaluated population; done cells are
+skipped, so the committed results are the plan's memory across sessions. A
+cell whose run directory (`--runs`/<cell>/) has a checkpoint continues from
+it (`coop-train --resume`), one whose training has finished is only
+evaluated. Evaluation is the paper's protocol: the final checkpoint, `--episodes`
+(100) episodes from seed `--eval-seed` (1000), which training never uses.
+Training and evaluation run in this process (`learner_loop.train`,
+`evaluate.evaluate`). Ctrl-C / SIGTERM stop the running cell after a
+checkpoint (exit status 128 + the signal's number); run the same command
+again to continue. See docs/paper.md.
+"""
+import dataclasses
+import os
+import shutil
+import signal
+import sys
+from typing import Callable, Optional
+
+from runners import cli
+from runners import paper_plan
+
+EVAL_FILE = 'eval_n{}.json'
+
+
+@dataclasses.dataclass(frozen=True)
+class PaperArgs:
+  """What to run of the paper's plan (every field is a `coop-paper` flag)."""
+
+  only: tuple[str, ...] = ()
+  """Cells to consider: task/variant[/stage]/n<N>/s<seed> paths or
+  prefixes (transport/hrl, corridor/*/n6) or cell names; empty for all."""
+  budget: int = 0
+  """Environment steps per cell instead of the plan's (quick runs); 0 keeps
+  the plan's."""
+  dry_run: bool = False
+  """Print the plan with each cell's status and estimated wall time; run
+  nothing."""
+  report: bool = False
+  """Print the tables built from the committed results; run nothing."""
+  docs: str = ''
+  """With --report: write the tables into the block between
+  '<!-- paper:begin -->' and '<!-- paper:end -->' of this markdown file
+  (appended if absent) instead of printing them."""
+  json: str = ''
+  """With --report: also write every evaluation in marl-eval's JSON layout
+  to this file."""
+  results: str = 'results/paper'
+  """Committed results: one folder per done cell."""
+  runs: str = 'runs/paper'
+  """Run directories of the cells being trained (checkpoints, events)."""
+  baselines: str = 'results/baselines'
+  """The difficulty references printed beside the learned figures."""
+  actors: int = 2
+  """Actor processes per training run (0: one process, no Ray)."""
+  ray_address: str = ''
+  """Join this Ray cluster (as coop-train --ray-address)."""
+  episodes: int = paper_plan.EPISODES
+  """Evaluation episodes per model and population."""
+  eval_seed: int = paper_plan.EVAL_SEED
+  """Evaluation seed (never used in training)."""
+  eval_envs: int = 10
+  """Environment copies stepped together while evaluating."""
+  progress: bool = True
+  """Progress bar while training."""
+
+  def __post_init__(self):
+    for name in ('budget', 'actors'):
+      if getattr(self, name) < 0:
+        raise ValueError(f'--{name} must be >= 0, got {getattr(self, name)}.')
+    for name in ('episodes', 'eval_envs'):
+      if getattr(self, name) < 1:
+        raise ValueError(f'--{name.replace("_", "-")} must be >= 1, got '
+                         f'{getattr(self, name)}.')
+    object.__setattr__(self, 'only', tuple(self.only))
+
+
+def budget(cell: paper_plan.Cell, args: PaperArgs) -> int:
+  return args.budget or cell.budget
+
+
+def run_directory(cell: paper_plan.Cell, args: PaperArgs) -> str:
+  return os.path.join(args.runs, cell.name)
+
+
+def results_directory(cell: paper_plan.Cell, args: PaperArgs) -> str:
+  return os.path.join(args.results, cell.name)
+
+
+def train_args(cell: paper_plan.Cell, args: PaperArgs, resume: bool = False):
+  """The cell's `TrainArgs` (its `coop-train` command)."""
+  from runners import config as config_lib  # pylint: disable=g-import-not-at-top
+  values = {'task': cell.task, 'agent': cell.agent,
+            'n_agents': cell.n_agents, 'seed': cell.seed,
+            'total_steps': budget(cell, args),
+            'logdir': run_directory(cell, args), 'actors': args.actors,
+            'ray_address': args.ray_address, 'progress': args.progress,
+            'resume': resume, **dict(cell.flags)}
+  if cell.stage:
+    values['stage'] = cell.stage
+  if cell.init_from:
+    values['init_from'] = tuple(
+        f'{species}={os.path.join(args.results, name)}'
+        for species, name in cell.init_from)
+  return config_lib.TrainArgs(**values)
+
+
+def command(cell: paper_plan.Cell, args: PaperArgs) -> str:
+  """The `coop-train` command that trains the cell."""
+  return cli.command_line(train_args(cell, args), 'coop-train',
+                          skip=('progress', 'resume'))
+
+
+def eval_command(cell: paper_plan.Cell, n_agents: int,
+                 args: PaperArgs) -> str:
+  """The `coop-eval` command of one evaluation of the cell's result."""
+  words = [f'coop-eval --checkpoint {results_directory(cell, args)}',
+           f'--episodes {args.episodes} --seeds {args.eval_seed}']
+  if n_agents != cell.n_agents:
+    words.append(f'--n-agents {n_agents}')
+  return ' '.join(words)
+
+
+@dataclasses.dataclass(frozen=True)
+class Status:
+  """Where a cell stands: 'done' (results committed), 'trained' (final
+  checkpoint, not yet evaluated), 'partial' (a checkpoint short of the
+  budget) or 'todo'."""
+  state: str
+  env_steps: int = 0
+
+  def describe(self, total: int) -> str:
+    if self.state == 'partial':
+      return f'partial {self.env_steps / 1e6:.2f}M/{total / 1e6:g}M'
+    return self.state
+
+
+def is_done(cell: paper_plan.Cell, args: PaperArgs) -> bool:
+  """Whether the cell's results are all in `--results`."""
+  folder = results_directory(cell, args)
+  return os.path.exists(os.path.join(folder, 'metrics.csv')) and all(
+      os.path.exists(os.path.join(folder, EVAL_FILE.format(n)))
+      for n in cell.populations)
+
+
+def status(cell: paper_plan.Cell, args: PaperArgs) -> Status:
+  """The cell's `Status`, from `--results` and its run directory."""
+  from runners import checkpoints  # pylint: disable=g-import-not-at-top
+  if is_done(cell, args):
+    return Status('done')
+  logdir = run_directory(cell, args)
+  if not checkpoints.list_checkpoints(logdir):
+    return Status('todo')
+  steps = checkpoints.read_state(checkpoints.resolve(logdir))['env_steps']
+  return Status('trained' if steps >= budget(cell, args) else 'partial',
+                steps)
+
+
+def selected(args: PaperArgs, plan=None) -> list[paper_plan.Cell]:
+  cells = [c for c in (paper_plan.PLAN if plan is None else plan)
+           if c.matches(args.only)]
+  if not cells:
+    raise ValueError(f'--only {" ".join(args.only)} selects no cell of the '
+                     'plan; coop-paper --dry-run lists them.')
+  return cells
+
+
+def dry_run(args: PaperArgs, plan=None) -> str:
+  """The plan as text: per cell its status, budget, estimated remaining
+  wall time on this machine and command; then the total."""
+  lines, total = [f'{"cell":32s} {"status":22s} {"budget":>7s}  '
+                  f'{"to go":>9s}  command'], 0.0
+  for cell in selected(args, plan):
+    state = status(cell, args)
+    steps = budget(cell, args)
+    remaining = {'done': None, 'trained': 0}.get(state.state,
+                                                 steps - state.env_steps)
+    seconds = 0.0 if remaining is None else paper_plan.estimated_seconds(
+        cell, max(remaining, 0), args.episodes)
+    total += seconds
+    lines.append(f'{cell.path:32s} {state.describe(steps):22s} '
+                 f'{steps / 1e6:6g}M  ~{seconds / 3600:6.1f} h  '
+                 f'{command(cell, args)}')
+  lines.append(f'{len(lines) - 1} cells, ~{total / 3600:.0f} h to go at '
+               f'{paper_plan.AGENT_STEPS_PER_SECOND:,.0f} Ant steps/s '
+               '(runners.paper_plan.AGENT_STEPS_PER_SECOND)')
+  return '\n'.join(lines)
+
+
+def evaluate_cell(cell: paper_plan.Cell, checkpoint: str, args: PaperArgs,
+                  log: Callable[[str], None]) -> dict[int, dict]:
+  """{population: eval JSON} of the final checkpoint (the paper's
+  protocol)."""
+  from runners import evaluate  # pylint: disable=g-import-not-at-top
+  from runners import marl_eval  # pylint: disable=g-import-not-at-top
+  out = {}
+  for n in cell.populations:
+    result = evaluate.evaluate(evaluate.EvalArgs(
+        checkpoint=(checkpoint,), episodes=args.episodes,
+        seeds=(args.eval_seed,), envs=args.eval_envs,
+        n_agents=0 if n == cell.n_agents else n),
+        log=lambda line, n=n: log(f'{cell.path} with {n}: {line}'))
+    model = result['models'][0]
+    out[n] = {
+        'cell': cell.name, 'experiment': cell.experiment, 'task': cell.task,
+        'agent': cell.agent, 'stage': cell.stage, 'seed': cell.seed,
+        'trained_n_agents': cell.n_agents, 'n_agents': n,
+        'checkpoint': os.path.join('checkpoints',
+                                   os.path.basename(checkpoint)),
+        'iteration': model['iteration'], 'env_steps': model['env_steps'],
+        'budget': budget(cell, args), 'episodes': result['episodes'],
+        'eval_seed': args.eval_seed,
+        **{k: result[k] for k in ('success', 'success_se', 'return',
+                                  'return_se')},
+        'train_command': command(cell, args),
+        'eval_command': eval_command(cell, n, args),
+        'marl_eval': marl_eval.layout(result['models'])}
+  return out
+
+
+def publish(cell: paper_plan.Cell, checkpoint: str,
+            evaluations: dict[int, dict], args: PaperArgs) -> str:
+  """Copies the small artifacts into `--results`/<cell>/, whole or not at
+  all: metrics.csv, the final checkpoint, the run's lower layer and the
+  eval JSONs."""
+  from runners import evaluate  # pylint: disable=g-import-not-at-top
+  from runners import run_dir  # pylint: disable=g-import-not-at-top
+  logdir = run_directory(cell, args)
+  final = results_directory(cell, args)
+  os.makedirs(args.results, exist_ok=True)
+  run_dir.remove_stale(args.results)
+  tmp = f'{final}.tmp-{os.getpid()}'
+  shutil.rmtree(tmp, ignore_errors=True)
+  os.makedirs(os.path.join(tmp, 'checkpoints'))
+  shutil.copy2(os.path.join(logdir, 'metrics.csv'), tmp)
+  shutil.copytree(checkpoint, os.path.join(
+      tmp, 'checkpoints', os.path.basename(checkpoint)))
+  if os.path.isdir(os.path.join(logdir, 'controller')):
+    shutil.copytree(os.path.join(logdir, 'controller'),
+                    os.path.join(tmp, 'controller'))
+  for n, figures in evaluations.items():
+    evaluate.write_json(os.path.join(tmp, EVAL_FILE.format(n)), figures)
+  run_dir.replace_directory(tmp, final)
+  return final
+
+
+def run_cell(cell: paper_plan.Cell, args: PaperArgs,
+             log: Callable[[str], None] = print) -> Optional[str]:
+  """Trains (or resumes) and evaluates one cell, then publishes it;
+  returns the name of the signal that stopped its training, else None."""
+  from runners import checkpoints  # pylint: disable=g-import-not-at-top
+  from runners import learner_loop  # pylint: disable=g-import-not-at-top
+  state = status(cell, args)
+  if state.state == 'done':
+    return None
+  log(f'== {cell.path}: {state.describe(budget(cell, args))}')
+  if state.state in ('todo', 'partial'):
+    if state.state == 'todo':
+      missing = [name for _, name in cell.init_from if not os.path.exists(
+          os.path.join(args.results, name, 'metrics.csv'))]
+      if missing:
+        raise ValueError(f'{cell.name} starts from {missing}, which are not '
+                         f'in {args.results} yet: run them first (--only).')
+    summary = learner_loop.train(
+        train_args(cell, args, resume=state.state == 'partial'))
+    if summary.get('stopped_by'):
+      return summary['stopped_by']
+  checkpoint = checkpoints.resolve(run_directory(cell, args))
+  steps = checkpoints.read_state(checkpoint)['env_steps']
+  if steps < budget(cell, args):
+    raise ValueError(f'{checkpoint} has {steps} env steps, short of the '
+                     f'budget {budget(cell, args)}: resume it first.')
+  published = publish(cell, checkpoint,
+                      evaluate_cell(cell, checkpoint, args, log), args)
+  log(f'{cell.path}: done, results in {published}')
+  return None
+
+
+def run_plan(args: PaperArgs, plan=None,
+             log: Callable[[str], None] = print) -> Optional[str]:
+  """Runs every selected cell that is not done, in plan order; returns the
+  signal that stopped it early, else None."""
+  default = PaperArgs()
+  if args.budget and (args.results == default.results
+                      or args.runs == default.runs):
+    raise ValueError('--budget runs are not the plan\'s: give them their '
+                     'own --results and --runs (e.g. /tmp/paper/results '
+                     f'/tmp/paper/runs), not {default.results} or '
+                     f'{default.runs}.')
+  for cell in selected(args, plan):
+    stopped = run_cell(cell, args, log)
+    if stopped:
+      return stopped
+  return None
+
+
+def main(argv=None):
+  args = cli.parse(PaperArgs, argv, description=__doc__.splitlines()[0])
+  try:
+    if args.report:
+      from runners import paper_report  # pylint: disable=g-import-not-at-top
+      text = paper_report.report(args)
+      if args.json:
+        from runners import evaluate  # pylint: disable=g-import-not-at-top
+        evaluate.write_json(args.json, paper_report.marl_eval_data(args))
+      if args.docs:
+        paper_report.write_block(args.docs, text)
+        print(f'Wrote the tables into {args.docs}.')
+      else:
+        print(text)
+      return
+    if args.dry_run:
+      print(dry_run(args))
+      return
+    stopped = run_plan(args, log=lambda line: print(line, flush=True))
+  except cli.user_errors() as e:
+    cli.fail('coop-paper', e)
+  if stopped:
+    print(f'Stopped by {stopped}; run the same coop-paper command again to '
+          'continue.', flush=True)
+    sys.exit(128 + signal.Signals[stopped].value)
+  print('Every selected cell is done; coop-paper --report shows the tables.')
+
+
+if __name__ == '__main__':
+  main()

@@ -1,0 +1,188 @@
+"""The paper's experiments as data: cells, their budgets, the paper's figures.
+
+A cell is one training run: task x variant x population x seed (a ravine
+curriculum stage is a cell of its own), with its budget in environment
+steps (0.05 s control steps of one environment copy), its training flags
+(`TrainArgs` fields) and the populations its final checkpoint is evaluated
+at (its own, then the zero-shot ones). `PLAN` lists them in the order they
+are worth running (`runners.paper` trains them in that order):
+
+1. Table 1, `hrl`: 5 seeds on transport (4 Ants), corridor (4 Ants) and
+   ravine (2 crossers + 2 pushers: `--stage pushers`, `--stage crossers`,
+   then `--stage joint --init-from pusher=... crosser=...`), seed by seed
+   across the tasks so that every row has a model early; each model is also
+   evaluated zero-shot at the other populations of Table 2 (2/3/5 Ants;
+   ravine, trained with 2 crossers: 3/4/5 crossers).
+2. Table 1, ablations: `no_memory` and `flat`, 3 seeds each, through the
+   same curriculum on the ravine (the paper gives the ablations the same
+   curriculum).
+3. Scaling: IPPO (`hrl`) against MAPPO (`mappo`) on the corridor with 6
+   and 7 Ants, 3 seeds (Fig. 4b, c); transport trained with 2, 3 and 5 Ants,
+   3 seeds (Fig. 4a; 4 Ants are Table 1's first 3 seeds).
+"""
+import dataclasses
+import fnmatch
+from typing import Any
+
+BUDGET = 20_000_000
+"""Environment steps per cell: `coop-train`'s default (about 3.5 h on the
+2-core development machine)."""
+STAGE_BUDGET = 10_000_000
+"""Environment steps of each of the ravine's two pretraining stages."""
+EPISODES = 100
+"""Evaluation episodes per model and population (the paper: 100)."""
+EVAL_SEED = 1000
+"""First evaluation seed (`coop-eval --seeds 1000`); training never uses it."""
+EPISODE_SECONDS = 40.0
+"""Episode length of the three tasks (docs/tasks.md), for time estimates."""
+CONTROL_TIMESTEP = 0.05
+AGENT_STEPS_PER_SECOND = 6_400.0
+"""Estimated Ant steps per second of a run: the README's 1,600 env steps/s
+with 4 Ants (`hrl`, 2 actors, the 2-core AMD EPYC development machine);
+a cell with k Ants per copy is estimated at 6,400 / k env steps/s."""
+POPULATIONS = (2, 3, 4, 5)
+"""The columns of Table 2 (ravine: crossers)."""
+
+# The paper's figures: success rate and standard error in %, 5 models x 100
+# episodes (d-hrl-corl2024.tex Tables 1 and 2; DESIGN.md section 5 restates
+# the rates).
+PAPER_TABLE1 = {
+    ('transport', 'hrl'): (76.8, 5.3), ('transport', 'flat'): (0.0, 0.0),
+    ('transport', 'no_memory'): (9.6, 3.2),
+    ('corridor', 'hrl'): (88.4, 4.8), ('corridor', 'flat'): (0.0, 0.0),
+    ('corridor', 'no_memory'): (12.0, 4.1),
+    ('ravine', 'hrl'): (50.4, 4.4), ('ravine', 'flat'): (0.0, 0.0),
+    ('ravine', 'no_memory'): (5.4, 4.2),
+}
+PAPER_TABLE2 = {
+    'transport': {2: (12.8, 5.6), 3: (39.8, 4.5), 4: (76.8, 5.3),
+                  5: (82.2, 4.5)},
+    'corridor': {2: (97.1, 1.8), 3: (93.6, 2.2), 4: (88.4, 4.8),
+                 5: (73.5, 2.5)},
+    'ravine': {2: (50.4, 4.4), 3: (36.2, 7.8), 4: (22.3, 5.1),
+               5: (10.9, 3.3)},
+}
+PAPER_FIGURE4 = {
+    'mappo': 'Fig. 4b, c: reward curves only; MAPPO\'s "grows slower and '
+             'ultimately does not converge" with 6 and 7 Ants',
+    'scaling': 'Fig. 4a: reward curves only; "the final reward increments '
+               'as the number of agents rises"',
+}
+VARIANT_NAMES = {'hrl': 'HRL', 'flat': 'No Hierarchy (`flat`)',
+                 'no_memory': 'No Spatiotemporal Memory (`no_memory`)',
+                 'mappo': 'MAPPO (`mappo`)'}
+
+
+@dataclasses.dataclass(frozen=True)
+class Cell:
+  """One training run of the plan and the evaluations of its final
+  checkpoint."""
+
+  experiment: str
+  """'table1', 'mappo' (IPPO vs MAPPO) or 'scaling' (Fig. 4a)."""
+  task: str
+  agent: str
+  """Variant: hrl, no_memory, flat or mappo."""
+  n_agents: int
+  """Ants (ravine: crossers, beside TrainArgs' 2 pushers)."""
+  seed: int
+  budget: int
+  """Environment steps to train for."""
+  stage: str = ''
+  """Ravine curriculum stage: pushers, crossers, or '' for the joint run."""
+  init_from: tuple[tuple[str, str], ...] = ()
+  """(species, cell name) pairs: the joint run starts from these stage
+  cells' committed final checkpoints (`--init-from`)."""
+  zero_shot: tuple[int, ...] = ()
+  """Other populations its final checkpoint is evaluated at."""
+  flags: tuple[tuple[str, Any], ...] = ()
+  """Other `TrainArgs` fields of the run (name, value)."""
+
+  @property
+  def name(self) -> str:
+    """Directory name: <task>_<agent>[_<stage>]_n<N>_s<seed>."""
+    stage = f'_{self.stage}' if self.stage else ''
+    return f'{self.task}_{self.agent}{stage}_n{self.n_agents}_s{self.seed}'
+
+  @property
+  def path(self) -> str:
+    """What `--only` matches: task/agent[/stage]/n<N>/s<seed>."""
+    parts = [self.task, self.agent, self.stage, f'n{self.n_agents}',
+             f's{self.seed}']
+    return '/'.join(p for p in parts if p)
+
+  @property
+  def populations(self) -> tuple[int, ...]:
+    """Populations evaluated: its own first, then the zero-shot ones."""
+    return (self.n_agents, *self.zero_shot)
+
+  @property
+  def ants(self) -> int:
+    """Ants per environment copy (the ravine adds its 2 pushers, except
+    in the crossers stage)."""
+    pushers = 2 if self.task == 'ravine' and self.stage != 'crossers' else 0
+    return self.n_agents + pushers
+
+  def matches(self, patterns) -> bool:
+    """Whether `--only` patterns select it: a pattern matches the cell's
+    path, a prefix of it (`transport/hrl`) or its name; `*` is a wildcard."""
+    return not patterns or any(
+        fnmatch.fnmatch(self.path, p) or fnmatch.fnmatch(self.path, p + '/*')
+        or fnmatch.fnmatch(self.name, p) for p in patterns)
+
+
+def trained(experiment, task, agent, n_agents, seed, zero_shot=(),
+            budget=BUDGET, flags=()) -> list[Cell]:
+  """The cells of one trained model: one run, or on the ravine its
+  curriculum (pushers, crossers, then the joint run from both)."""
+  if task != 'ravine':
+    return [Cell(experiment, task, agent, n_agents, seed, budget,
+                 zero_shot=zero_shot, flags=flags)]
+  stages = [Cell(experiment, task, agent, n_agents, seed, STAGE_BUDGET,
+                 stage=stage, flags=flags) for stage in ('pushers', 'crossers')]
+  joint = Cell(experiment, task, agent, n_agents, seed, budget,
+               init_from=(('pusher', stages[0].name),
+                          ('crosser', stages[1].name)),
+               zero_shot=zero_shot, flags=flags)
+  return [*stages, joint]
+
+
+TABLE1_TASKS = (('transport', 4), ('corridor', 4), ('ravine', 2))
+
+
+def _zero_shot(n_agents):
+  return tuple(n for n in POPULATIONS if n != n_agents)
+
+
+def paper_plan() -> list[Cell]:
+  """Every cell of the paper's experiments, most valuable first."""
+  plan = []
+  for seed in range(5):
+    for task, n in TABLE1_TASKS:
+      plan += trained('table1', task, 'hrl', n, seed, _zero_shot(n))
+  for seed in range(3):
+    for agent in ('no_memory', 'flat'):
+      for task, n in TABLE1_TASKS:
+        plan += trained('table1', task, agent, n, seed)
+  for n in (6, 7):
+    for seed in range(3):
+      for agent in ('hrl', 'mappo'):
+        plan += trained('mappo', 'corridor', agent, n, seed)
+  for n in (2, 3, 5):
+    for seed in range(3):
+      plan += trained('scaling', 'transport', 'hrl', n, seed)
+  return plan
+
+
+PLAN = paper_plan()
+
+
+def estimated_seconds(cell: Cell, steps: int, episodes: int = EPISODES
+                      ) -> float:
+  """Estimated wall time (s) of `steps` training steps of `cell` plus the
+  evaluations of its final checkpoint, at `AGENT_STEPS_PER_SECOND`."""
+  steps_per_episode = EPISODE_SECONDS / CONTROL_TIMESTEP
+  ant_steps = steps * cell.ants + sum(
+      episodes * steps_per_episode * (cell.ants - cell.n_agents + n)
+      for n in cell.populations)
+  return ant_steps / AGENT_STEPS_PER_SECOND

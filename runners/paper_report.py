@@ -1,0 +1,261 @@
+"""The paper's tables from committed results alone: `coop-paper --report`.
+
+Reads `--results`/<cell>/eval_n<N>.json of the plan's cells (no training,
+no simulation) and `--baselines` (the difficulty references), and writes
+markdown: per table, our success rate +- standard error over all models x
+episodes, the spread between models (standard error of the per-model
+rates), how many of the declared models are in, the paper's figure and the
+greedy and oracle references beside; then each cell's command.
+"""
+import csv
+import json
+import os
+from typing import Any, Optional
+
+from runners import evaluate
+from runners import paper
+from runners import paper_plan
+
+INTRODUCTION = ('The plan of docs/paper.md, regenerated from the committed '
+                '`results/paper/` with `coop-paper --report --docs '
+                'docs/results.md`.')
+SCALING_SEEDS = 3
+"""Fig. 4a's models per population."""
+BEGIN, END = '<!-- paper:begin -->', '<!-- paper:end -->'
+
+
+def read_evaluation(cell: paper_plan.Cell, n_agents: int,
+                    args: paper.PaperArgs) -> Optional[dict[str, Any]]:
+  """The eval JSON of `cell` at population `n_agents`, or None."""
+  path = os.path.join(paper.results_directory(cell, args),
+                      paper.EVAL_FILE.format(n_agents))
+  if not os.path.exists(path):
+    return None
+  with open(path) as f:
+    return json.load(f)
+
+
+def _episodes(evaluation: dict[str, Any], metric: str) -> list[float]:
+  """Per-episode values of `metric` from an eval JSON's marl-eval runs."""
+  values = []
+  for tasks in evaluation['marl_eval'].values():
+    for algorithms in tasks.values():
+      for runs in algorithms.values():
+        for steps in runs.values():
+          for step, entry in steps.items():
+            if step.startswith('step_'):
+              values += entry[metric]
+  return values
+
+
+def summarize(cells, n_agents: int, args: paper.PaperArgs
+              ) -> dict[str, Any]:
+  """Success and return over the models of `cells` evaluated at
+  `n_agents`: pooled over all episodes, with the spread between models
+  (`evaluate.mean_and_error`, as coop-eval does), and how many of the
+  declared models are in ('models', 'declared')."""
+  evaluations = [e for e in (read_evaluation(c, n_agents, args)
+                             for c in cells) if e is not None]
+  out = {'models': len(evaluations), 'declared': len(cells),
+         'env_steps': sorted({e['env_steps'] for e in evaluations})}
+  if not evaluations:
+    return out
+  for metric in ('success', 'return'):
+    per_model = [_episodes(e, metric) for e in evaluations]
+    out[metric], out[f'{metric}_se'] = evaluate.mean_and_error(
+        [v for values in per_model for v in values])
+    out[f'{metric}_spread'] = evaluate.mean_and_error(
+        [sum(v) / len(v) for v in per_model])[1]
+  return out
+
+
+def _rate(value, error) -> str:
+  return f'{value:.1f}% +- {error:.1f}'
+
+
+def _ours(summary, metric='success') -> list[str]:
+  """[figure +- SE, spread, models, env steps] cells of a table row."""
+  if not summary['models']:
+    return ['not run' if metric == 'success' else '', '',
+            f'0/{summary["declared"]}', '']
+  scale = 100 if metric == 'success' else 1
+  spread = summary[f'{metric}_spread'] * scale
+  steps = '/'.join(_steps(s) for s in summary['env_steps'])
+  return [_rate(summary[metric] * scale, summary[f'{metric}_se'] * scale)
+          if metric == 'success' else
+          f'{summary[metric]:.0f} +- {summary[f"{metric}_se"]:.0f}',
+          f'+- {spread:.1f}' if summary['models'] > 1 else '',
+          f'{summary["models"]}/{summary["declared"]}', steps]
+
+
+def _steps(count: int) -> str:
+  """Environment steps as 20M, 5.12k or 16."""
+  for scale, unit in ((1e6, 'M'), (1e3, 'k')):
+    if count >= scale:
+      return f'{count / scale:.3g}{unit}'
+  return str(count)
+
+
+def _reference(references, task, n_agents, policy) -> str:
+  out = references.get(task, {}).get((n_agents, policy))
+  if out is None:
+    return ''
+  return f'{100 * out["success"]:.0f}% +- {100 * out["success_se"]:.0f}'
+
+
+def _row(cells) -> str:
+  return '| ' + ' | '.join(cells) + ' |'
+
+
+def _header(names) -> list[str]:
+  return [_row(names), '|' + '---|' * len(names)]
+
+
+def _models(plan, experiment, task, agent, n_agents):
+  """The joint (final) cells of one trained configuration, all seeds."""
+  return [c for c in plan if (c.experiment, c.task, c.agent, c.n_agents) ==
+          (experiment, task, agent, n_agents) and not c.stage]
+
+
+def _unit(task):
+  return 'crossers' if task == 'ravine' else 'Ants'
+
+
+def report(args: paper.PaperArgs, plan=None) -> str:
+  """The markdown tables (and commands) of the plan's committed results."""
+  from runners import baselines  # pylint: disable=g-import-not-at-top
+  plan = paper.selected(args, plan)
+  references = (baselines.read_results(args.baselines)
+                if os.path.isdir(args.baselines) else {})
+  refs = lambda task, n: [_reference(references, task, n, p)  # pylint: disable=g-long-lambda
+                          for p in ('greedy', 'oracle')]
+  columns = ['success +- SE', 'between models', 'models', 'env steps']
+  lines = [
+      f'Generated by `coop-paper --report` from `{args.results}` (do not '
+      'edit by hand). Success rate +- standard error over all models x '
+      f'episodes ({args.episodes} episodes per model from seed '
+      f'{args.eval_seed}, final checkpoints); "between models": standard '
+      'error of the per-model rates; references: docs/baselines.md.', '']
+  table1 = [(t, a, n) for t, n in paper_plan.TABLE1_TASKS
+            for a in ('hrl', 'no_memory', 'flat')
+            if _models(plan, 'table1', t, a, n)]
+  if table1:
+    lines += ['### Table 1: success rate, HRL against the ablations', '',
+              *_header(['task', 'variant', *columns, 'paper', 'greedy',
+                        'oracle'])]
+    for task, agent, n in table1:
+      summary = summarize(_models(plan, 'table1', task, agent, n), n, args)
+      lines.append(_row([f'{task} ({n} {_unit(task)})',
+                         paper_plan.VARIANT_NAMES[agent], *_ours(summary),
+                         _rate(*paper_plan.PAPER_TABLE1[(task, agent)]),
+                         *refs(task, n)]))
+    lines.append('')
+  table2 = [(t, n) for t, n in paper_plan.TABLE1_TASKS
+            if _models(plan, 'table1', t, 'hrl', n)]
+  if table2:
+    lines += ['### Table 2: zero-shot transfer of the HRL models', '',
+              *_header(['task', 'population', *columns, 'paper', 'greedy',
+                        'oracle'])]
+    for task, trained in table2:
+      cells = _models(plan, 'table1', task, 'hrl', trained)
+      for n in paper_plan.POPULATIONS:
+        note = ' (trained)' if n == trained else ''
+        lines.append(_row([task, f'{n} {_unit(task)}{note}',
+                           *_ours(summarize(cells, n, args)),
+                           _rate(*paper_plan.PAPER_TABLE2[task][n]),
+                           *refs(task, n)]))
+    lines.append('')
+  lines += _curves_tables(plan, args, columns, refs)
+  lines += ['### Commands', '',
+            f'Each cell: `coop-paper --only <path>` runs the command below, '
+            f'then `coop-eval --checkpoint {args.results}/<cell> --episodes '
+            f'{args.episodes} --seeds {args.eval_seed}` (`--n-agents N` for '
+            'the zero-shot populations) on its final checkpoint.', '',
+            f'<details><summary>The {len(plan)} cells\' commands</summary>',
+            '', '```']
+  for cell in plan:
+    done = 'done' if paper.is_done(cell, args) else 'not run'
+    lines.append(f'# {cell.path} ({done})')
+    lines.append(paper.command(cell, args))
+  lines += ['```', '', '</details>', '']
+  return '\n'.join(lines)
+
+
+def _curves_tables(plan, args, columns, refs) -> list[str]:
+  """IPPO vs MAPPO (Fig. 4b, c) and training population (Fig. 4a): the
+  paper shows curves only, so its column is a note."""
+  lines = []
+  mappo = [(n, a) for n in (6, 7) for a in ('hrl', 'mappo')
+           if _models(plan, 'mappo', 'corridor', a, n)]
+  if mappo:
+    lines += ['### IPPO against MAPPO on the corridor (Fig. 4b, c)', '',
+              f'Paper: {paper_plan.PAPER_FIGURE4["mappo"]}.', '',
+              *_header(['Ants', 'variant', *columns, 'return +- SE',
+                        'greedy', 'oracle'])]
+    for n, agent in mappo:
+      summary = summarize(_models(plan, 'mappo', 'corridor', agent, n), n,
+                          args)
+      name = 'IPPO (`hrl`)' if agent == 'hrl' else paper_plan.VARIANT_NAMES[
+          agent]
+      lines.append(_row([str(n), name, *_ours(summary),
+                         _ours(summary, 'return')[0],
+                         *refs('corridor', n)]))
+    lines.append('')
+  scaling = {n: _models(plan, 'scaling', 'transport', 'hrl', n) or [
+      c for c in _models(plan, 'table1', 'transport', 'hrl', n)
+      if c.seed < SCALING_SEEDS] for n in paper_plan.POPULATIONS}
+  scaling = {n: cells for n, cells in scaling.items() if cells}
+  if scaling:
+    lines += ['### Transport trained with 2-5 Ants (Fig. 4a)', '',
+              f'Paper: {paper_plan.PAPER_FIGURE4["scaling"]}. 4 Ants: '
+              f'Table 1\'s first {SCALING_SEEDS} models.', '',
+              *_header(['Ants', *columns, 'return +- SE',
+                        'training return (last window)', 'greedy',
+                        'oracle'])]
+    for n, cells in scaling.items():
+      summary = summarize(cells, n, args)
+      lines.append(_row([str(n), *_ours(summary),
+                         _ours(summary, 'return')[0],
+                         _training_return(cells, args),
+                         *refs('transport', n)]))
+    lines.append('')
+  return lines
+
+
+def _training_return(cells, args) -> str:
+  """Mean over the models of the last metrics.csv row's window return."""
+  values = []
+  for cell in cells:
+    path = os.path.join(paper.results_directory(cell, args), 'metrics.csv')
+    if os.path.exists(path):
+      with open(path, newline='') as f:
+        rows = [r for r in csv.DictReader(f) if r.get('return')]
+      if rows:
+        values.append(float(rows[-1]['return']))
+  return f'{sum(values) / len(values):.0f}' if values else ''
+
+
+def marl_eval_data(args: paper.PaperArgs, plan=None) -> dict[str, Any]:
+  """Every committed evaluation of the plan in one marl-eval dict."""
+  from runners import marl_eval  # pylint: disable=g-import-not-at-top
+  evaluations = [read_evaluation(c, n, args) for c in paper.selected(
+      args, plan) for n in c.populations]
+  return marl_eval.merge(e['marl_eval'] for e in evaluations if e)
+
+
+def write_block(path: str, text: str) -> None:
+  """Puts `text` between the BEGIN and END markers of the markdown file
+  `path` (a section with them is appended when absent), whole."""
+  with open(path) as f:
+    document = f.read()
+  block = f'{BEGIN}\n{text.rstrip()}\n{END}'
+  if BEGIN in document and END in document:
+    head, _, rest = document.partition(BEGIN)
+    document = head + block + rest.partition(END)[2]
+  else:
+    document = (document.rstrip('\n') + '\n\n## The paper\'s experiments\n\n'
+                + INTRODUCTION + '\n\n' + block + '\n')
+  tmp = f'{path}.tmp-{os.getpid()}'
+  with open(tmp, 'w') as f:
+    f.write(document)
+  os.replace(tmp, path)

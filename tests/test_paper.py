@@ -1,0 +1,269 @@
+"""coop-paper on tiny budgets and fixture results, and coop-eval --json."""
+import csv
+import dataclasses
+import json
+import os
+import shutil
+
+import jax
+from jax.experimental.compilation_cache import compilation_cache
+import pytest
+
+from runners import checkpoints
+from runners import cli
+from runners import config as config_lib
+from runners import evaluate
+from runners import learner_loop
+from runners import marl_eval
+from runners import paper
+from runners import paper_plan
+from runners import paper_report
+from tests.test_train import controller  # pylint: disable=unused-import
+from tests.test_train import STEPS
+from tests.test_train import TINY
+
+pytestmark = pytest.mark.filterwarnings('ignore:os.fork:RuntimeWarning')
+BASELINES = os.path.join(os.path.dirname(__file__), '..', 'results',
+                         'baselines')
+
+
+@pytest.fixture(scope='module', autouse=True)
+def _compilation_cache(tmp_path_factory):
+  """Every `train` / `evaluate` call builds new learners and actors, whose
+  programs a persistent compilation cache lets it reuse (a resumed tiny run:
+  19 s -> 5 s on the shared 2-core machine); restored afterwards."""
+  settings = {'jax_compilation_cache_dir': str(tmp_path_factory.mktemp('xla')),
+              'jax_persistent_cache_min_compile_time_secs': 0,
+              'jax_persistent_cache_min_entry_size_bytes': 0}
+  saved = {name: getattr(jax.config, name) for name in settings}
+  for name, value in settings.items():
+    jax.config.update(name, value)
+  compilation_cache.reset_cache()
+  yield
+  for name, value in saved.items():
+    jax.config.update(name, value)
+  compilation_cache.reset_cache()
+
+
+@pytest.fixture(scope='module')
+def tiny_run(tmp_path_factory, controller):  # pylint: disable=redefined-outer-name
+  """One iteration of 2 (the cells' budget) of TINY's hrl on transport."""
+  logdir = str(tmp_path_factory.mktemp('paper') / 'hrl')
+  learner_loop.train(config_lib.TrainArgs(
+      **{**TINY, 'task': 'transport', 'logdir': logdir,
+         'controller': controller, 'total_steps': STEPS}))
+  return logdir
+
+
+def _tiny_plan(controller_dir):  # pylint: disable=redefined-outer-name
+  """Two cells with TINY's agent and task flags (the machine's flags are
+  PaperArgs')."""
+  flags = tuple((k, v) for k, v in {**TINY, 'controller': controller_dir
+                                    }.items()
+                if k not in ('n_agents', 'actors', 'progress'))
+  return [paper_plan.Cell('table1', 'transport', 'hrl', 2, 0, 2 * STEPS,
+                          zero_shot=(3,), flags=flags),
+          paper_plan.Cell('table1', 'transport', 'hrl', 2, 1, 2 * STEPS,
+                          flags=flags)]
+
+
+def _args(tmp_path, **overrides):
+  values = dict(results=str(tmp_path / 'results'), runs=str(tmp_path / 'runs'),
+                actors=0, episodes=2, eval_envs=2, progress=False,
+                baselines=BASELINES)
+  return paper.PaperArgs(**{**values, **overrides})
+
+
+def _rows(path):
+  with open(path) as f:
+    return list(csv.DictReader(f))
+
+
+def _evaluation(cell, n_agents, successes, env_steps=20_000_000):
+  """An eval JSON as `paper.evaluate_cell` writes it, with these
+  per-episode successes."""
+  episodes = [{'return': 100.0 * s, 'success': float(s)} for s in successes]
+  model = {'task': cell.task, 'n_agents': n_agents, 'stage': cell.stage,
+           'agent': cell.agent, 'seed': cell.seed, 'iteration': 7,
+           'env_steps': env_steps, 'episodes': episodes}
+  return {'cell': cell.name, 'n_agents': n_agents, 'env_steps': env_steps,
+          'marl_eval': marl_eval.layout([model])}
+
+
+def _commit(cell, args, evaluations):
+  """Writes a done cell into args.results: {population: successes}."""
+  folder = paper.results_directory(cell, args)
+  os.makedirs(folder, exist_ok=True)
+  with open(os.path.join(folder, 'metrics.csv'), 'w') as f:
+    f.write('update,env_steps,return\n1,16,42.0\n')
+  for n, successes in evaluations.items():
+    evaluate.write_json(os.path.join(folder, paper.EVAL_FILE.format(n)),
+                        _evaluation(cell, n, successes))
+
+
+def test_dry_run_prints_every_cell_with_its_status(tmp_path, capsys):
+  args = _args(tmp_path)
+  first, second = paper_plan.PLAN[:2]
+  _commit(first, args, {n: [1] for n in first.populations})
+  logdir = paper.run_directory(second, args)
+  os.makedirs(os.path.join(logdir, 'checkpoints', 'ckpt_00000003'))
+  with open(os.path.join(logdir, 'checkpoints', 'ckpt_00000003',
+                         'state.json'), 'w') as f:
+    json.dump({'format': checkpoints.FORMAT, 'iteration': 3,
+               'env_steps': 1_500_000, 'species': []}, f)
+  paper.main(['--dry-run', '--results', args.results, '--runs', args.runs])
+  lines = capsys.readouterr().out.splitlines()
+  assert len(lines) == len(paper_plan.PLAN) + 2  # Header and total.
+  for cell, line in zip(paper_plan.PLAN, lines[1:]):
+    assert line.startswith(cell.path + ' ') and 'coop-train' in line
+  assert ' done ' in lines[1] and 'partial 1.50M/20M' in lines[2]
+  assert all(' todo ' in line for line in lines[3:-1])
+  assert lines[-1].startswith(f'{len(paper_plan.PLAN)} cells, ~')
+  # Every command is the cell's own TrainArgs, through coop-train's parser.
+  for cell in paper_plan.PLAN:
+    words = paper.command(cell, args).split()
+    assert words[0] == 'coop-train'
+    assert cli.parse(config_lib.TrainArgs, words[1:]) == dataclasses.replace(
+        paper.train_args(cell, args), progress=True)
+
+
+def test_the_plan_is_the_papers():
+  plan = paper_plan.PLAN
+  assert len({c.name for c in plan}) == len(plan)
+  first = [c.experiment for c in plan]
+  assert first == sorted(first, key=['table1', 'mappo', 'scaling'].index)
+  hrl = [c for c in plan if c.experiment == 'table1' and c.agent == 'hrl'
+         and not c.stage]
+  assert sorted({(c.task, c.n_agents) for c in hrl}) == [
+      ('corridor', 4), ('ravine', 2), ('transport', 4)]
+  assert {c.seed for c in hrl} == set(range(5))
+  assert all(sorted(c.populations) == [2, 3, 4, 5] for c in hrl)
+  ravine = [c for c in plan if c.task == 'ravine' and not c.stage]
+  for joint in ravine:  # Its stages come first and feed it.
+    names = [c.name for c in plan]
+    for _, stage in joint.init_from:
+      assert names.index(stage) < names.index(joint.name)
+  ablations = [c for c in plan if c.agent in ('flat', 'no_memory')]
+  assert {c.seed for c in ablations} == {0, 1, 2}
+  assert [c.agent for c in plan[:len(hrl) + 10]].count('flat') == 0
+  versus = {(c.agent, c.n_agents) for c in plan if c.experiment == 'mappo'}
+  assert versus == {('hrl', 6), ('hrl', 7), ('mappo', 6), ('mappo', 7)}
+  scaling = {c.n_agents for c in plan if c.experiment == 'scaling'}
+  assert scaling == {2, 3, 5}
+  args = paper.PaperArgs()
+  assert {c.path for c in paper.selected(dataclasses.replace(
+      args, only=('ravine/hrl/n2/s0',)))} == {'ravine/hrl/n2/s0'}
+  assert len(paper.selected(dataclasses.replace(
+      args, only=('ravine/hrl',)))) == 15
+  with pytest.raises(ValueError, match='selects no cell'):
+    paper.selected(dataclasses.replace(args, only=('ravine/nothing',)))
+
+
+def test_the_plan_skips_done_cells_and_resumes_a_partial_one(
+    controller, tiny_run, tmp_path):  # pylint: disable=redefined-outer-name
+  plan = _tiny_plan(controller)
+  args = _args(tmp_path)
+  partial, done = plan
+  # A run killed after iteration 1 of 2, with the cell's settings.
+  shutil.copytree(tiny_run, paper.run_directory(partial, args))
+  assert paper.status(partial, args) == paper.Status('partial', STEPS)
+  _commit(done, args, {2: [1, 0]})
+  assert paper.status(done, args).state == 'done'
+  paper.run_plan(args, plan, log=lambda line: None)
+  logdir = paper.run_directory(partial, args)
+  assert [int(r['update']) for r in _rows(
+      os.path.join(logdir, 'metrics.csv'))] == [1, 2]
+  assert not os.path.exists(paper.run_directory(done, args))  # Skipped.
+  folder = paper.results_directory(partial, args)
+  assert sorted(os.listdir(folder)) == ['checkpoints', 'controller',
+                                        'eval_n2.json', 'eval_n3.json',
+                                        'metrics.csv']
+  assert os.listdir(os.path.join(folder, 'checkpoints')) == ['ckpt_00000002']
+  assert paper.status(partial, args).state == 'done'
+  for n in (2, 3):
+    with open(os.path.join(folder, f'eval_n{n}.json')) as f:
+      figures = json.load(f)
+    assert (figures['n_agents'], figures['iteration'], figures['env_steps'],
+            figures['episodes']) == (n, 2, 2 * STEPS, 2)
+    marl_eval.check(figures['marl_eval'])
+    assert list(figures['marl_eval']['coop_suite']) == [f'transport_n{n}']
+  # The committed copy evaluates on its own.
+  out = evaluate.evaluate(evaluate.EvalArgs(checkpoint=(folder,), episodes=1,
+                                            envs=1))
+  assert out['models'][0]['iteration'] == 2
+  paper.run_plan(args, plan, log=pytest.fail)  # Nothing left to do.
+
+
+def test_report_rebuilds_the_tables_from_committed_results(tmp_path, capsys):
+  args = _args(tmp_path, episodes=4)
+  hrl = [c for c in paper_plan.PLAN if (c.experiment, c.task, c.agent) ==
+         ('table1', 'transport', 'hrl')]
+  _commit(hrl[0], args, {4: [1, 1, 0, 0], 2: [0, 0, 0, 1], 3: [1] * 4,
+                         5: [0] * 4})
+  _commit(hrl[1], args, {4: [1, 0, 0, 0], 2: [0] * 4, 3: [1] * 4,
+                         5: [0] * 4})
+  text = paper_report.report(args)
+  # 3 of 8 episodes: 37.5% +- std(ddof=1) / sqrt(8) = 18.3; the models'
+  # rates 50% and 25%: +- 12.5 between them.
+  row = next(line for line in text.splitlines()
+             if line.startswith('| transport (4 Ants) | HRL |'))
+  assert row == ('| transport (4 Ants) | HRL | 37.5% +- 18.3 | +- 12.5 | 2/5 '
+                 '| 20M | 76.8% +- 5.3 | 55% +- 5 | 54% +- 5 |')
+  assert ('| transport | 2 Ants | 12.5% +- 12.5 | +- 12.5 | 2/5 | 20M | '
+          '12.8% +- 5.6 | 12% +- 3 | 12% +- 3 |') in text
+  assert '| corridor (4 Ants) | HRL | not run |  | 0/5 |' in text
+  assert '| 4 | 37.5% +- 18.3 | +- 12.5 | 2/3 |' in text  # Fig. 4a.
+  assert 'coop-train --actors 0 --seed 1 --logdir' in text
+  assert '# transport/hrl/n4/s1 (done)' in text
+  # Into a marked block of a markdown file, again and again.
+  docs = tmp_path / 'results.md'
+  docs.write_text('# Results\n\nBefore.\n')
+  for _ in range(2):
+    paper.main(cli.command_line(args, 'coop-paper').split()[1:] + [
+        '--report', '--docs', str(docs), '--json', str(tmp_path / 'all.json')])
+    written = docs.read_text()
+    assert written.startswith('# Results\n\nBefore.\n')
+    assert written.count(paper_report.BEGIN) == 1
+    assert text.strip() in written
+  data = json.loads((tmp_path / 'all.json').read_text())
+  marl_eval.check(data)
+  assert sorted(data['coop_suite']) == [f'transport_n{n}' for n in (2, 3, 4, 5)]
+  assert sorted(data['coop_suite']['transport_n4']['hrl']) == ['seed_0',
+                                                               'seed_1']
+  assert 'Wrote the tables' in capsys.readouterr().out
+
+
+def test_eval_json_follows_marl_eval_layout(tiny_run, tmp_path, capsys):
+  path = tmp_path / 'eval.json'
+  checkpoint = checkpoints.resolve(tiny_run)
+  evaluate.main(['--checkpoint', tiny_run, checkpoint, '--episodes', '3',
+                 '--envs', '2', '--json', str(path)])
+  assert f'marl-eval JSON: {path}' in capsys.readouterr().out
+  data = json.loads(path.read_text())
+  marl_eval.check(data)
+  # The README's layout, level by level.
+  runs = data['coop_suite']['transport_n2']['hrl']
+  assert list(runs) == ['seed_0', 'seed_0_2']
+  for run in runs.values():
+    assert list(run) == ['step_1', 'absolute_metrics']
+    step = run['step_1']
+    assert step['step_count'] == STEPS
+    metrics = sorted(k for k in step if k != 'step_count')
+    assert {'return', 'success'} <= set(metrics)
+    assert all(len(step[k]) == 3 for k in metrics)
+    assert all(v in (0.0, 1.0) for v in step['success'])
+    assert sorted(run['absolute_metrics']) == metrics
+  # What check() refuses.
+  broken = json.loads(path.read_text())
+  run = broken['coop_suite']['transport_n2']['hrl']['seed_0']
+  run['step_1']['step_count'] = 1.5
+  with pytest.raises(ValueError, match='step_count must be an int'):
+    marl_eval.check(broken)
+  run['step_1']['step_count'] = 16
+  run['step_2'] = run.pop('absolute_metrics')
+  with pytest.raises(ValueError, match='last entry'):
+    marl_eval.check(broken)
+  run['absolute_metrics'] = run.pop('step_2')
+  run['step_1']['success'] = []
+  with pytest.raises(ValueError, match='non-empty list'):
+    marl_eval.check(broken)
