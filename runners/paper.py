@@ -17,7 +17,10 @@ evaluated. Evaluation is the paper's protocol: the final checkpoint, `--episodes
 Training and evaluation run in this process (`learner_loop.train`,
 `evaluate.evaluate`). Ctrl-C / SIGTERM stop the running cell after a
 checkpoint (exit status 128 + the signal's number); run the same command
-again to continue. See docs/paper.md.
+again to continue. `coop-paper --stash` copies unfinished runs into
+`--partial` (results/paper_partial) to be committed at the end of a
+session; the next session's `coop-paper` resumes from them. See
+docs/paper.md.
 """
 import dataclasses
 import os
@@ -58,6 +61,14 @@ class PaperArgs:
   """Committed results: one folder per done cell."""
   runs: str = 'runs/paper'
   """Run directories of the cells being trained (checkpoints, events)."""
+  partial: str = 'results/paper_partial'
+  """Committed unfinished runs (`--stash`): one resumable folder per cell,
+  so a session that ends mid-run hands its cell to the next one."""
+  stash: bool = False
+  """Copy every selected unfinished run's newest checkpoint, metrics.csv
+  and lower layer into `--partial`/<cell>/ (commit them); train nothing.
+  A later `coop-paper` resumes from there when `--runs` has no checkpoint
+  of the cell."""
   baselines: str = 'results/baselines'
   """The difficulty references printed beside the learned figures."""
   actors: int = 2
@@ -94,6 +105,10 @@ def run_directory(cell: paper_plan.Cell, args: PaperArgs) -> str:
 
 def results_directory(cell: paper_plan.Cell, args: PaperArgs) -> str:
   return os.path.join(args.results, cell.name)
+
+
+def partial_directory(cell: paper_plan.Cell, args: PaperArgs) -> str:
+  return os.path.join(args.partial, cell.name)
 
 
 def train_args(cell: paper_plan.Cell, args: PaperArgs, resume: bool = False):
@@ -159,7 +174,9 @@ def status(cell: paper_plan.Cell, args: PaperArgs) -> Status:
     return Status('done')
   logdir = run_directory(cell, args)
   if not checkpoints.list_checkpoints(logdir):
-    return Status('todo')
+    logdir = partial_directory(cell, args)  # A stashed run, if any.
+    if not checkpoints.list_checkpoints(logdir):
+      return Status('todo')
   steps = checkpoints.read_state(checkpoints.resolve(logdir))['env_steps']
   return Status('trained' if steps >= budget(cell, args) else 'partial',
                 steps)
@@ -233,11 +250,23 @@ def publish(cell: paper_plan.Cell, checkpoint: str,
   all: metrics.csv, the final checkpoint, the run's lower layer and the
   eval JSONs."""
   from runners import evaluate  # pylint: disable=g-import-not-at-top
-  from runners import run_dir  # pylint: disable=g-import-not-at-top
-  logdir = run_directory(cell, args)
   final = results_directory(cell, args)
-  os.makedirs(args.results, exist_ok=True)
-  run_dir.remove_stale(args.results)
+  _copy_run(run_directory(cell, args), checkpoint, final, {
+      EVAL_FILE.format(n): lambda path, figures=figures: evaluate.write_json(
+          path, figures) for n, figures in evaluations.items()})
+  shutil.rmtree(partial_directory(cell, args), ignore_errors=True)
+  return final
+
+
+def _copy_run(logdir: str, checkpoint: str, final: str,
+              extra: Optional[dict[str, Callable[[str], None]]] = None):
+  """Writes `final` whole or not at all: `logdir`'s metrics.csv and lower
+  layer and the one `checkpoint` (a run directory that coop-train can
+  resume), plus {file name: writer(path)} of `extra`."""
+  from runners import run_dir  # pylint: disable=g-import-not-at-top
+  parent = os.path.dirname(final)
+  os.makedirs(parent, exist_ok=True)
+  run_dir.remove_stale(parent)
   tmp = f'{final}.tmp-{os.getpid()}'
   shutil.rmtree(tmp, ignore_errors=True)
   os.makedirs(os.path.join(tmp, 'checkpoints'))
@@ -247,10 +276,34 @@ def publish(cell: paper_plan.Cell, checkpoint: str,
   if os.path.isdir(os.path.join(logdir, 'controller')):
     shutil.copytree(os.path.join(logdir, 'controller'),
                     os.path.join(tmp, 'controller'))
-  for n, figures in evaluations.items():
-    evaluate.write_json(os.path.join(tmp, EVAL_FILE.format(n)), figures)
+  for name, write in (extra or {}).items():
+    write(os.path.join(tmp, name))
   run_dir.replace_directory(tmp, final)
-  return final
+
+
+def stash(cell: paper_plan.Cell, args: PaperArgs) -> Optional[str]:
+  """Copies the cell's unfinished run (its newest checkpoint, metrics.csv
+  and lower layer) into `--partial`/<cell>/; returns that folder, or None
+  when the cell is done or has no checkpoint in `--runs`."""
+  from runners import checkpoints  # pylint: disable=g-import-not-at-top
+  logdir = run_directory(cell, args)
+  if is_done(cell, args) or not checkpoints.list_checkpoints(logdir):
+    return None
+  folder = partial_directory(cell, args)
+  _copy_run(logdir, checkpoints.resolve(logdir), folder)
+  return folder
+
+
+def unstash(cell: paper_plan.Cell, args: PaperArgs) -> bool:
+  """Puts a stashed run into `--runs`/<cell>/ when that has no checkpoint;
+  returns whether it did."""
+  from runners import checkpoints  # pylint: disable=g-import-not-at-top
+  logdir, folder = run_directory(cell, args), partial_directory(cell, args)
+  if (checkpoints.list_checkpoints(logdir)
+      or not checkpoints.list_checkpoints(folder)):
+    return False
+  shutil.copytree(folder, logdir, dirs_exist_ok=True)
+  return True
 
 
 def run_cell(cell: paper_plan.Cell, args: PaperArgs,
@@ -263,6 +316,8 @@ def run_cell(cell: paper_plan.Cell, args: PaperArgs,
   if state.state == 'done':
     return None
   log(f'== {cell.path}: {state.describe(budget(cell, args))}')
+  if unstash(cell, args):
+    log(f'{cell.path}: continues from {partial_directory(cell, args)}')
   if state.state in ('todo', 'partial'):
     if state.state == 'todo':
       missing = [name for _, name in cell.init_from if not os.path.exists(
@@ -320,6 +375,13 @@ def main(argv=None):
       return
     if args.dry_run:
       print(dry_run(args))
+      return
+    if args.stash:
+      folders = [f for f in map(lambda c: stash(c, args), selected(args))
+                 if f]
+      print('\n'.join(['Stashed (commit these; the next coop-paper resumes '
+                       'from them):', *folders]) if folders
+            else 'No unfinished run to stash.')
       return
     stopped = run_plan(args, log=lambda line: print(line, flush=True))
   except cli.user_errors() as e:

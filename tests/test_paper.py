@@ -69,6 +69,7 @@ def _tiny_plan(controller_dir):  # pylint: disable=redefined-outer-name
 
 def _args(tmp_path, **overrides):
   values = dict(results=str(tmp_path / 'results'), runs=str(tmp_path / 'runs'),
+                partial=str(tmp_path / 'partial'),
                 actors=0, episodes=2, eval_envs=2, progress=False,
                 baselines=BASELINES)
   return paper.PaperArgs(**{**values, **overrides})
@@ -116,7 +117,7 @@ def test_dry_run_prints_every_cell_with_its_status(tmp_path, capsys):
   assert len(lines) == len(paper_plan.PLAN) + 2  # Header and total.
   for cell, line in zip(paper_plan.PLAN, lines[1:]):
     assert line.startswith(cell.path + ' ') and 'coop-train' in line
-  assert ' done ' in lines[1] and 'partial 1.50M/20M' in lines[2]
+  assert ' done ' in lines[1] and 'partial 1.50M/15M' in lines[2]
   assert all(' todo ' in line for line in lines[3:-1])
   assert lines[-1].startswith(f'{len(paper_plan.PLAN)} cells, ~')
   # Every command is the cell's own TrainArgs, through coop-train's parser.
@@ -164,8 +165,15 @@ def test_the_plan_skips_done_cells_and_resumes_a_partial_one(
   plan = _tiny_plan(controller)
   args = _args(tmp_path)
   partial, done = plan
-  # A run killed after iteration 1 of 2, with the cell's settings.
+  # A run killed after iteration 1 of 2, with the cell's settings, stashed
+  # at the end of a session; the next session has only the stash.
   shutil.copytree(tiny_run, paper.run_directory(partial, args))
+  assert paper.status(partial, args) == paper.Status('partial', STEPS)
+  assert paper.stash(done, args) is None  # Nothing to stash.
+  stashed = paper.stash(partial, args)
+  assert sorted(os.listdir(stashed)) == ['checkpoints', 'controller',
+                                         'metrics.csv']
+  shutil.rmtree(args.runs)
   assert paper.status(partial, args) == paper.Status('partial', STEPS)
   _commit(done, args, {2: [1, 0]})
   assert paper.status(done, args).state == 'done'
@@ -180,6 +188,7 @@ def test_the_plan_skips_done_cells_and_resumes_a_partial_one(
                                         'metrics.csv']
   assert os.listdir(os.path.join(folder, 'checkpoints')) == ['ckpt_00000002']
   assert paper.status(partial, args).state == 'done'
+  assert not os.path.exists(stashed)  # Published: the stash is spent.
   for n in (2, 3):
     with open(os.path.join(folder, f'eval_n{n}.json')) as f:
       figures = json.load(f)
@@ -213,7 +222,7 @@ def test_report_rebuilds_the_tables_from_committed_results(tmp_path, capsys):
           '12.8% +- 5.6 | 12% +- 3 | 12% +- 3 |') in text
   assert '| corridor (4 Ants) | HRL | not run |  | 0/5 |' in text
   assert '| 4 | 37.5% +- 18.3 | +- 12.5 | 2/3 |' in text  # Fig. 4a.
-  assert 'coop-train --actors 0 --seed 1 --logdir' in text
+  assert 'coop-train --actors 0 --total-steps 15000000 --seed 1 --logdir' in text
   assert '# transport/hrl/n4/s1 (done)' in text
   # Into a marked block of a markdown file, again and again.
   docs = tmp_path / 'results.md'
