@@ -21,6 +21,7 @@ from agents.networks import policy_value
 from agents.ppo import config as ppo_config
 from runners import actor_pool
 from runners import checkpoints
+from runners import cli
 from runners import config as config_lib
 from runners import envs as envs_lib
 from runners import evaluate
@@ -69,16 +70,10 @@ def _args(logdir, controller, **overrides):
 
 def _argv(controller, total_steps):  # pylint: disable=redefined-outer-name
   """The flags of `_args` for the CLI (without --task and --logdir)."""
-  argv = ['--controller', controller, '--total-steps', str(total_steps)]
-  for name, value in TINY.items():
-    flag = '--' + name.replace('_', '-')
-    if isinstance(value, bool):
-      argv.append(flag if value else '--no-' + flag[2:])
-    elif isinstance(value, tuple):
-      argv += [flag, *map(str, value)]
-    else:
-      argv += [flag, str(value)]
-  return argv
+  args = config_lib.TrainArgs(**TINY, controller=controller,
+                              total_steps=total_steps)
+  return cli.command_line(args, 'coop-train',
+                          skip=('task', 'logdir')).split()[1:]
 
 
 def _rows(logdir):
