@@ -5,8 +5,6 @@ import json
 import os
 import shutil
 
-import jax
-from jax.experimental.compilation_cache import compilation_cache
 import pytest
 
 from runners import checkpoints
@@ -25,24 +23,6 @@ from tests.test_train import TINY
 pytestmark = pytest.mark.filterwarnings('ignore:os.fork:RuntimeWarning')
 BASELINES = os.path.join(os.path.dirname(__file__), '..', 'results',
                          'baselines')
-
-
-@pytest.fixture(scope='module', autouse=True)
-def _compilation_cache(tmp_path_factory):
-  """Every `train` / `evaluate` call builds new learners and actors, whose
-  programs a persistent compilation cache lets it reuse (a resumed tiny run:
-  19 s -> 5 s on the shared 2-core machine); restored afterwards."""
-  settings = {'jax_compilation_cache_dir': str(tmp_path_factory.mktemp('xla')),
-              'jax_persistent_cache_min_compile_time_secs': 0,
-              'jax_persistent_cache_min_entry_size_bytes': 0}
-  saved = {name: getattr(jax.config, name) for name in settings}
-  for name, value in settings.items():
-    jax.config.update(name, value)
-  compilation_cache.reset_cache()
-  yield
-  for name, value in saved.items():
-    jax.config.update(name, value)
-  compilation_cache.reset_cache()
 
 
 @pytest.fixture(scope='module')
