@@ -377,8 +377,7 @@ def main(argv=None):
       print(dry_run(args))
       return
     if args.stash:
-      folders = [f for f in map(lambda c: stash(c, args), selected(args))
-                 if f]
+      folders = [f for f in (stash(c, args) for c in selected(args)) if f]
       print('\n'.join(['Stashed (commit these; the next coop-paper resumes '
                        'from them):', *folders]) if folders
             else 'No unfinished run to stash.')
