@@ -516,6 +516,16 @@ def read_results(folder: str) -> dict[str, dict[tuple[int, str], dict]]:
   return table
 
 
+def population_unit(task: str) -> str:
+  """What a task's agent count counts, for table headers."""
+  return 'crossers' if task == 'ravine' else 'Ants'
+
+
+def success_cell(figures: dict) -> str:
+  """A result's success as a table cell: '54% +- 5'."""
+  return f'{100 * figures["success"]:.0f}% +- {100 * figures["success_se"]:.0f}'
+
+
 def report(folder: str) -> str:
   """Markdown: per task, success +- standard error for each population
   (rows) and reference (columns), "ever reached" in brackets where the task
@@ -524,7 +534,7 @@ def report(folder: str) -> str:
   for task, cells in read_results(folder).items():
     counts = sorted({n for n, _ in cells})
     policies = [p for p in POLICIES if any(p == q for _, q in cells)]
-    unit = 'crossers' if task == 'ravine' else 'Ants'
+    unit = population_unit(task)
     lines += [f'### {task}', '',
               f'| {unit} | ' + ' | '.join(policies) + ' | episodes (seeds) |',
               '|---|' + '---|' * (len(policies) + 1)]
@@ -535,7 +545,7 @@ def report(folder: str) -> str:
         if out is None:
           row.append('')
           continue
-        cell = f'{100 * out["success"]:.0f}% +- {100 * out["success_se"]:.0f}'
+        cell = success_cell(out)
         if 'reached' in out:
           cell += f' ({100 * out["reached"]:.0f}%)'
         row.append(cell)

@@ -12,6 +12,7 @@ import json
 import os
 from typing import Any, Optional
 
+from runners import baselines
 from runners import evaluate
 from runners import paper
 from runners import paper_plan
@@ -98,9 +99,7 @@ def _steps(count: int) -> str:
 
 def _reference(references, task, n_agents, policy) -> str:
   out = references.get(task, {}).get((n_agents, policy))
-  if out is None:
-    return ''
-  return f'{100 * out["success"]:.0f}% +- {100 * out["success_se"]:.0f}'
+  return '' if out is None else baselines.success_cell(out)
 
 
 def _row(cells) -> str:
@@ -117,13 +116,8 @@ def _models(plan, experiment, task, agent, n_agents):
           (experiment, task, agent, n_agents) and not c.stage]
 
 
-def _unit(task):
-  return 'crossers' if task == 'ravine' else 'Ants'
-
-
 def report(args: paper.PaperArgs, plan=None) -> str:
   """The markdown tables (and commands) of the plan's committed results."""
-  from runners import baselines  # pylint: disable=g-import-not-at-top
   plan = paper.selected(args, plan)
   references = (baselines.read_results(args.baselines)
                 if os.path.isdir(args.baselines) else {})
@@ -145,7 +139,7 @@ def report(args: paper.PaperArgs, plan=None) -> str:
                         'oracle'])]
     for task, agent, n in table1:
       summary = summarize(_models(plan, 'table1', task, agent, n), n, args)
-      lines.append(_row([f'{task} ({n} {_unit(task)})',
+      lines.append(_row([f'{task} ({n} {baselines.population_unit(task)})',
                          paper_plan.VARIANT_NAMES[agent], *_ours(summary),
                          _rate(*paper_plan.PAPER_TABLE1[(task, agent)]),
                          *refs(task, n)]))
@@ -160,7 +154,7 @@ def report(args: paper.PaperArgs, plan=None) -> str:
       cells = _models(plan, 'table1', task, 'hrl', trained)
       for n in paper_plan.POPULATIONS:
         note = ' (trained)' if n == trained else ''
-        lines.append(_row([task, f'{n} {_unit(task)}{note}',
+        lines.append(_row([task, f'{n} {baselines.population_unit(task)}{note}',
                            *_ours(summarize(cells, n, args)),
                            _rate(*paper_plan.PAPER_TABLE2[task][n]),
                            *refs(task, n)]))
