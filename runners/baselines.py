@@ -434,6 +434,7 @@ class BaselineArgs:
   this folder (e.g. results/baselines), one table per task."""
 
   def __post_init__(self):
+    from runners import config as config_lib  # pylint: disable=g-import-not-at-top
     if self.task not in REFERENCES:
       raise ValueError(f'--task must be one of {tuple(REFERENCES)}, got '
                        f'{self.task!r}.')
@@ -442,8 +443,7 @@ class BaselineArgs:
                        f'{self.policy!r}.')
     if self.episodes < 1:
       raise ValueError(f'--episodes must be >= 1, got {self.episodes}.')
-    if not self.time_limit >= 0:  # Also refuses NaN.
-      raise ValueError(f'--time-limit must be >= 0 s, got {self.time_limit}.')
+    config_lib.check_time_limit(self.time_limit)
 
   def env_options(self) -> dict[str, Any]:
     options = {}
