@@ -1,31 +1,42 @@
-"""Throughput of the distributed training pipeline (coop-train's loop).
+"""Training throughput as ratios to raw MuJoCo, all measured in one run.
 
-    PYTHONPATH=. python benchmarks/training_throughput.py
-    PYTHONPATH=. python benchmarks/training_throughput.py --task corridor \
-        --envs-per-actor 8 --iterations 6
+    python benchmarks/training_throughput.py
+    python benchmarks/training_throughput.py --task corridor --iterations 6
 
-Prints, in agent-environment steps per second (low-level 0.05 s control
-steps x agents):
-  * bare: the same CommandWrapper copies stepped with random commands in
-    one process through the same stepping layer (`rollout.EnvBatch`), no
-    policy and no learning;
-  * pipeline with 1 and with 2 Ray actors: whole synchronous iterations
-    (collect + learn), the first iteration (start-up, compilation) left out;
-    the 2 / 1 ratio and the fraction of bare throughput the 1-actor
-    pipeline keeps;
-  * the learner's seconds per 64k samples (commands) with the default
-    network sizes and PPO settings.
-Uses the shipped lower layer unless --controller is given.
+"raw" is the loop a bare simulator runs on the very same compiled model:
+set `ctrl`, then one `mujoco.mj_step` per physics substep. It replays the
+controls the measured loop applied, from the same start state (a copy of
+the MjData), so both go through the same trajectory, contacts included.
+Timed loops and their raw replays alternate in blocks; a ratio is the
+median over the blocks of raw time / measured time. Prints:
+
+  composer step, per-agent list of actions / raw   (target >= 0.85)
+  composer step, one [n, 8] array / raw
+  environment + lower layer, copies in lockstep / raw
+                                   (`EnvBatch`; one core; target >= 0.70)
+  environment + lower layer, copy by copy / raw
+                                   (each copy's `CommandWrapper.step`)
+  pipeline with N actors / (N x raw), N = 1, 2     (target >= 0.60 at 2)
+  the learner's share of a 2-actor iteration
+
+The one-core loops run in a child process pinned to one CPU with the
+actors' single-threaded settings (`actor_pool.ACTOR_ENV_VARS`); the
+pipelines are `coop-train`'s own loop (`learner_loop.train`, Ray actors)
+with the default training settings, the first iteration (start-up,
+compilation) left out. Commands are random; the shipped lower layer
+walks unless --controller is given.
 """
 import argparse
-import math
+import json
 import os
+import subprocess
 import sys
 import tempfile
 import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), '..'))
 
+import mujoco  # pylint: disable=g-import-not-at-top
 import numpy as np  # pylint: disable=g-import-not-at-top
 
 from runners import actor_pool  # pylint: disable=g-import-not-at-top
@@ -33,30 +44,112 @@ from runners import config as config_lib  # pylint: disable=g-import-not-at-top
 from runners import learner_loop  # pylint: disable=g-import-not-at-top
 from runners import rollout  # pylint: disable=g-import-not-at-top
 
+LONG_EPISODE = 10_000.0
+"""Seconds: no episode ends inside a measurement."""
 
-def bare(args, train_args, seconds):
-  """Agent steps / s of EnvBatch with random commands, one process."""
-  config = config_lib.hierarchy_config(train_args)
-  spec = learner_loop.environment_spec(train_args)
-  batch = rollout.EnvBatch(spec, config, range(args.envs_per_actor))
+
+class _Controls:
+  """Records the controls a coop_suite environment applies at each step,
+  with the physics state each block starts from, for a raw replay."""
+
+  def __init__(self, env):
+    self.physics = env.physics
+    self.start = mujoco.MjData(self.physics.model.ptr)
+    self.controls = []
+    step = env.step
+
+    def recording(action, observe=True):
+      timestep = step(action, observe)
+      self.controls.append(self.physics.data.ctrl.copy())
+      return timestep
+    env.step = recording
+    self.begin()
+
+  def begin(self):
+    """Marks the start of a block."""
+    model = self.physics.model.ptr
+    mujoco.mj_copyData(self.start, model, self.physics.data.ptr)
+    self.controls = []
+
+  def replay_seconds(self, substeps):
+    """Seconds of the raw loop through the block's controls."""
+    model = self.physics.model.ptr
+    data = mujoco.MjData(model)
+    mujoco.mj_copyData(data, model, self.start)
+    begin = time.perf_counter()
+    for control in self.controls:
+      data.ctrl[:] = control
+      for _ in range(substeps):
+        mujoco.mj_step(model, data)
+    return time.perf_counter() - begin
+
+
+def _ratio(run_block, recorders, substeps, blocks):
+  """Median over blocks of (raw replay seconds / `run_block()` seconds),
+  and the raw loop's median rate in control steps/s."""
+  ratios, raw_rates = [], []
+  for _ in range(blocks):
+    for recorder in recorders:
+      recorder.begin()
+    begin = time.perf_counter()
+    run_block()
+    seconds = time.perf_counter() - begin
+    raw = sum(r.replay_seconds(substeps) for r in recorders)
+    ratios.append(raw / seconds)
+    raw_rates.append(sum(len(r.controls) for r in recorders) / raw)
+  return float(np.median(ratios)), float(np.median(raw_rates))
+
+
+def one_core(args):
+  """The single-process ratios (run in the pinned child)."""
+  import coop_suite  # pylint: disable=g-import-not-at-top
+  out = {}
   rng = np.random.default_rng(0)
-  n_agents = batch.envs[0].n_agents
+  env = coop_suite.load(args.task, args.n_agents, seed=0,
+                        time_limit=LONG_EPISODE)
+  env.reset()
+  substeps = env.task.physics_steps_per_control_step
+  recorder = _Controls(env)
+  arrays = rng.uniform(-1, 1, (args.block_steps, env.n_agents, 8))
+  lists = [list(action) for action in arrays]  # The documented convention.
+  for name, actions in (('composer_list', lists),
+                        ('composer_array', arrays)):
+    def block(actions=actions):
+      for action in actions:
+        env.step(action)
+    block()  # Warm-up.
+    out[name], out['raw_steps_per_s'] = _ratio(block, [recorder], substeps,
+                                               args.blocks)
+  env.close()
 
-  def random_actions():
-    return {s.name: rng.uniform(*s.action_bounds,
-                                size=(len(batch.rows[s.name][1]), 2))
-            for s in batch.species}
-  batch.step(random_actions())  # Warm-up (controller compilation).
-  steps, start = 0, time.perf_counter()
-  while time.perf_counter() - start < seconds:
-    steps += batch.step(random_actions())[2]
-  elapsed = time.perf_counter() - start
+  train_args = _train_args(args, 1, '', time_limit=LONG_EPISODE)
+  spec = learner_loop.environment_spec(train_args)
+  batch = rollout.EnvBatch(spec, config_lib.hierarchy_config(train_args),
+                           range(args.envs_per_actor), global_state=False)
+  recorders = [_Controls(copy.env) for copy in batch.envs]
+  periods = max(1, args.block_steps // (batch.envs[0].low_level_steps
+                                         * args.envs_per_actor))
+  (species,) = batch.species  # Every agent commanded alike.
+  commands = rng.uniform(-3, 3, (periods, args.envs_per_actor,
+                                 len(species.agents), 2))
+
+  def lockstep():
+    for command in commands:
+      batch.step({species.name: command.reshape(-1, 2)})
+
+  def copy_by_copy():
+    for command in commands:
+      for copy, copy_command in zip(batch.envs, command):
+        copy.step(copy_command)
+  for name, block in (('lockstep', lockstep), ('copy_by_copy', copy_by_copy)):
+    block()  # Warm-up (the controller's compilation).
+    out[name], _ = _ratio(block, recorders, substeps, args.blocks)
   batch.close()
-  return steps * n_agents / elapsed
+  return out
 
 
 def pipeline(args, actors, logdir):
-  """Agent steps / s of whole training iterations with `actors` actors."""
+  """(env steps/s, learner's share) of coop-train's loop with `actors`."""
   rows = []
   train_args = _train_args(args, actors, logdir)
   per_iteration = (actors * args.envs_per_actor * train_args.sequence_length
@@ -65,73 +158,66 @@ def pipeline(args, actors, logdir):
       **vars(train_args), 'total_steps': per_iteration * args.iterations})
   learner_loop.train(train_args,
                      on_iteration=lambda i, row, pool: rows.append(row))
-  steps = [r['agent_steps'] - p['agent_steps']
-           for r, p in zip(rows[1:], rows)]  # Without the first iteration.
-  seconds = sum(n / r['agent_sps'] for n, r in zip(steps, rows[1:]))
-  return sum(steps) / seconds, np.mean([r['time/learn'] for r in rows[1:]])
+  rows = rows[1:]  # Without the first iteration.
+  steps = sum(r['sps'] * (r['time/collect'] + r['time/learn']) for r in rows)
+  seconds = sum(r['time/collect'] + r['time/learn'] for r in rows)
+  learn = sum(r['time/learn'] for r in rows)
+  return steps / seconds, learn / seconds
 
 
-def learner_seconds(args, samples=65536):
-  """Seconds of one learner step on `samples` commands (default sizes)."""
-  import jax  # pylint: disable=g-import-not-at-top
-  from agents.hierarchy import builder as hierarchy_builder  # pylint: disable=g-import-not-at-top
-  from agents.ppo import types  # pylint: disable=g-import-not-at-top
-  config = config_lib.hierarchy_config(config_lib.TrainArgs(task=args.task))
-  builder = hierarchy_builder.HierarchyBuilder(config)
-  obs_dim = args.observation_size
-  networks = builder.make_networks(obs_dim, 2)
-  learner = builder.make_learner(networks)
-  t, b = config.sequence_length, samples // config.sequence_length
-  rng = np.random.default_rng(0)
-  f32 = lambda *shape: rng.normal(size=shape).astype(np.float32)
-  batch = types.SequenceBatch(
-      observation=f32(t + 1, b, obs_dim), raw_action=f32(t, b, 2),
-      log_prob=f32(t, b) - 2, reward=f32(t, b), discount=np.ones((t, b),
-                                                               np.float32),
-      reset=np.zeros((t + 1, b), bool), initial_carry=f32(b, networks.carry_size),
-      truncation=np.zeros((t, b), np.float32))
-  jax.block_until_ready(learner.step(batch))  # Compilation.
-  start = time.perf_counter()
-  jax.block_until_ready(learner.step(batch))
-  return time.perf_counter() - start
-
-
-def _train_args(args, actors, logdir):
-  return config_lib.TrainArgs(
-      task=args.task, n_agents=args.n_agents, actors=actors,
-      envs_per_actor=args.envs_per_actor, logdir=logdir,
-      controller=args.controller, progress=False, total_steps=1,
-      num_minibatches=math.gcd(4, args.n_agents * args.envs_per_actor))
+def _train_args(args, actors, logdir, **overrides):
+  return config_lib.TrainArgs(**{
+      'task': args.task, 'n_agents': args.n_agents, 'actors': actors,
+      'envs_per_actor': args.envs_per_actor, 'logdir': logdir,
+      'controller': args.controller, 'progress': False, 'total_steps': 1,
+      **overrides})
 
 
 def main(argv=None):
   parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
   parser.add_argument('--task', default='transport')
   parser.add_argument('--n-agents', type=int, default=4)
-  parser.add_argument('--envs-per-actor', type=int, default=4)
-  parser.add_argument('--iterations', type=int, default=4)
-  parser.add_argument('--bare-seconds', type=float, default=10.0)
+  parser.add_argument('--envs-per-actor', type=int,
+                      default=config_lib.TrainArgs.envs_per_actor)
+  parser.add_argument('--iterations', type=int, default=6,
+                      help='pipeline iterations, the first left out')
+  parser.add_argument('--block-steps', type=int, default=400,
+                      help='control steps per timed block (all copies)')
+  parser.add_argument('--blocks', type=int, default=9)
   parser.add_argument('--controller', default='')
+  parser.add_argument('--one-core', action='store_true',
+                      help=argparse.SUPPRESS)  # The child's part.
   args = parser.parse_args(argv)
+  if args.one_core:
+    print(json.dumps(one_core(args)))
+    return
+  cpu = sorted(os.sched_getaffinity(0))[-1]
+  child = subprocess.run(
+      ['taskset', '-c', str(cpu), sys.executable, __file__, '--one-core',
+       *(argv if argv is not None else sys.argv[1:])],
+      env={**os.environ, **actor_pool.ACTOR_ENV_VARS}, check=True,
+      capture_output=True, text=True)
+  single = json.loads(child.stdout.strip().splitlines()[-1])
+  raw = single['raw_steps_per_s']
   actor_pool.init_ray(num_cpus=max(2, os.cpu_count()))
   with tempfile.TemporaryDirectory() as tmp:
-    train_args = _train_args(args, 1, os.path.join(tmp, 'bare'))
-    bare_sps = bare(args, train_args, args.bare_seconds)
-    one, learn_one = pipeline(args, 1, os.path.join(tmp, 'one'))
-    two, _ = pipeline(args, 2, os.path.join(tmp, 'two'))
-    species = learner_loop.probe(learner_loop.environment_spec(train_args),
-                                 config_lib.hierarchy_config(train_args))[0]
-    args.observation_size = species[0].observation_size
-  per_64k = learner_seconds(args)
+    one, _ = pipeline(args, 1, os.path.join(tmp, 'one'))
+    two, learner_share = pipeline(args, 2, os.path.join(tmp, 'two'))
   print(f'{args.task}, {args.n_agents} agents, {args.envs_per_actor} copies '
-        f'per actor, {os.cpu_count()} CPUs')
-  print(f'bare environments (random commands): {bare_sps:8.0f} agent steps/s')
-  print(f'pipeline, 1 actor:                   {one:8.0f} agent steps/s '
-        f'({100 * one / bare_sps:.0f}% of bare; learner {learn_one:.2f} s '
-        'per iteration)')
-  print(f'pipeline, 2 actors:                  {two:8.0f} agent steps/s '
-        f'(x{two / one:.2f} of 1 actor)')
-  print(f'learner: {per_64k:.2f} s per 64k samples (default networks)')
+        f'per actor, {os.cpu_count()} CPUs; raw {raw:.0f} control steps/s '
+        'on one core')
+  lines = [
+      ('composer step, per-agent list / raw', single['composer_list'],
+       '>= 0.85'),
+      ('composer step, [n, 8] array / raw', single['composer_array'], ''),
+      ('env + lower layer, lockstep / raw', single['lockstep'], '>= 0.70'),
+      ('env + lower layer, copy by copy / raw', single['copy_by_copy'], ''),
+      ('pipeline, 1 actor / raw', one / raw, ''),
+      ('pipeline, 2 actors / (2 x raw)', two / (2 * raw), '>= 0.60'),
+      ("learner's share of a 2-actor iteration", learner_share, ''),
+  ]
+  for name, value, target in lines:
+    print(f'{name:42s} {value:5.2f}  {target}')
 
 
 if __name__ == '__main__':

@@ -147,6 +147,16 @@ class CoopEnvironment(composer.Environment):
           np.broadcast_to(specs[0].minimum, shape).astype(np.float64),
           np.broadcast_to(specs[0].maximum, shape).astype(np.float64))
     shape, low, high = self._action_bounds
+    if type(action) in (list, tuple):  # pylint: disable=unidiomatic-typecheck
+      # The documented convention, one array per agent: stacked in one call
+      # when that gives a float array of the right shape; anything else goes
+      # through the checks below, which name the agent at fault.
+      try:
+        stacked = np.asarray(action)
+      except (TypeError, ValueError):
+        stacked = None
+      if stacked is not None and stacked.dtype.kind == "f":
+        action = stacked
     if (type(action) is np.ndarray and action.shape == shape  # pylint: disable=unidiomatic-typecheck
         and action.dtype.kind == "f"):
       if action.dtype not in _KERNEL_DTYPES:

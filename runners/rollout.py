@@ -13,11 +13,12 @@ all copies. `collect(variables, version)` acts with exactly those
 variables for `sequence_length` commands and returns one `SequenceBatch`
 per species plus the episodes that ended.
 
-The lower layer runs inside each copy's `CommandWrapper`, one controller
-call per copy and low-level step. Batching it across copies was measured
-and left out: the controller is compute-bound on CPU (B=4: 0.05 ms, B=32:
-0.28 ms per call, against ~0.4-0.8 ms of physics per copy and step), so a
-cross-copy batch would save under 10% and duplicate the wrapper's logic.
+Commanded copies step their command periods in lockstep (the phases of
+`CommandWrapper.step`): one lower-layer call per low-level step serves all
+copies and agents, fed by one array the copies' packed proprioception and
+commands are written into. A call costs about the same for 4 rows as for
+32 (mostly dispatch; docs/performance.md), so an actor with 8 copies of 4
+Ants pays for one call where it paid for eight.
 """
 import os
 import sys
@@ -61,6 +62,13 @@ class EnvBatch:
     self.species = envs_lib.species_layout(self.envs[0], config)
     self._global_state = global_state and config.uses_global_state
     self._dt = envs_lib.control_timestep(self.envs[0])
+    self._controller = self.envs[0].controller if spec.uses_commands else None
+    if self._controller is not None:
+      if any(env.controller is not self._controller for env in self.envs):
+        raise ValueError('Copies stepped together share one controller.')
+      self._inputs = np.zeros((self.num_envs * self.envs[0].n_agents,
+                               self._controller.observation_size),
+                              np.float32)
     self._observations = [env.reset().observation for env in self.envs]
     self._reset = np.ones(len(self.envs), bool)
     self._rows = self._compute_rows()
@@ -110,14 +118,10 @@ class EnvBatch:
     discounts = np.ones(self.num_envs, np.float32)
     last = np.zeros(self.num_envs, bool)
     episodes, env_steps = [], 0
-    for e, env in enumerate(self.envs):
-      action = np.zeros((n_agents, self.species[0].action_size))
-      for s in self.species:
-        n = len(s.agents)
-        action[list(s.agents)] = actions[s.name][e * n:(e + 1) * n]
-      start = env.physics.data.time
-      timestep = env.step(action)
-      env_steps += max(1, int(round((env.physics.data.time - start)
+    start = [env.physics.data.time for env in self.envs]
+    for e, (env, timestep) in enumerate(zip(self.envs, self._step_copies(
+        self._copy_actions(actions)))):
+      env_steps += max(1, int(round((env.physics.data.time - start[e])
                                     / self._dt)))
       rewards[e] = timestep.reward
       discounts[e] = timestep.discount
@@ -137,6 +141,36 @@ class EnvBatch:
           discount=np.repeat(discounts, n),
           observation=self._rows[s.name][0])
     return steps, episodes, env_steps
+
+  def _copy_actions(self, actions):
+    """{species: [B_s, A]} -> one [n_agents, A] array per copy."""
+    n_agents = self.envs[0].n_agents
+    out = np.zeros((self.num_envs, n_agents, self.species[0].action_size))
+    for s in self.species:
+      out[:, list(s.agents)] = actions[s.name].reshape(
+          self.num_envs, len(s.agents), -1)
+    return out
+
+  def _step_copies(self, actions):
+    """Every copy's TimeStep after one step with its actions. Commanded
+    copies (`CommandWrapper`) run their command periods in lockstep: one
+    lower-layer call per low-level step for all copies and agents, fed by
+    one array whose rows the copies fill (a copy whose period ended early
+    keeps its last rows, so the call's shape, and its compilation, stay
+    the same)."""
+    if self._controller is None:
+      return [env.step(a) for env, a in zip(self.envs, actions)]
+    for env, a in zip(self.envs, actions):
+      env.begin(a)
+    n = self.envs[0].n_agents
+    active = list(range(self.num_envs))
+    while active:
+      for e in active:
+        self.envs[e].controller_input(out=self._inputs[e * n:(e + 1) * n])
+      joints = self._controller.act(self._inputs)
+      active = [e for e in active
+                if not self.envs[e].advance(joints[e * n:(e + 1) * n])]
+    return [env.end() for env in self.envs]
 
   def close(self):
     for env in self.envs:

@@ -7,6 +7,7 @@ import csv
 import dataclasses
 import json
 import os
+from unittest import mock
 
 import dm_env
 import numpy as np
@@ -216,9 +217,16 @@ class _Recorder:
   def __getattr__(self, name):
     return getattr(self._controller, name)
 
-  def batch(self, observations):
-    self.inputs.append({k: np.array(v) for k, v in observations.items()})
-    return self._controller.batch(observations)
+  def act(self, flat):
+    self.inputs.append(_unflatten(self._controller, flat))
+    return self._controller.act(flat)
+
+
+def _unflatten(controller, flat):
+  """A controller's flat inputs [B, D] -> {key: [B, k]}."""
+  ends = np.cumsum(controller.config['observation_sizes'])
+  return dict(zip(controller.observation_keys,
+                  np.split(np.array(flat, np.float64), ends[:-1], axis=1)))
 
 
 def test_command_wrapper_specs_and_episode_boundaries(controller):
@@ -323,7 +331,8 @@ def test_command_wrapper_feeds_heading_frame_commands(controller):
   frames = env._frames()  # pylint: disable=protected-access
   np.testing.assert_allclose(
       frames.to_heading_frame(env.world_commands),
-      env._controller_inputs()['command/target'])  # pylint: disable=protected-access
+      _unflatten(controller, env.controller_input())['command/target'],
+      rtol=1e-6)
   assert fed[0]['proprio/joints_pos'].shape == (2, 8)
 
 
@@ -396,3 +405,42 @@ def test_shipped_velocity_controller_tracks_commands():
   assert results['speed_error'][0] <= 0.3, results
   # A zero command: it stays within a few centimetres and does not fall.
   assert results['stand_drift'][0] <= 0.3 and results['stand_fall'][0] == 0
+
+
+def test_copies_in_lockstep_step_exactly_as_each_copy_alone():
+  """`EnvBatch` runs its copies' command periods in lockstep with one
+  lower-layer call per low-level step; every observation, reward and
+  discount equals stepping each copy alone with `CommandWrapper.step`,
+  through an episode that ends mid-period and the reset after it."""
+  from runners import config as config_lib  # pylint: disable=g-import-not-at-top
+  from runners import learner_loop  # pylint: disable=g-import-not-at-top
+  from runners import rollout  # pylint: disable=g-import-not-at-top
+  args = config_lib.TrainArgs(task='transport', n_agents=2, time_limit=1.2)
+  spec = learner_loop.environment_spec(args)
+  batch = rollout.EnvBatch(spec, config_lib.hierarchy_config(args), [3, 4])
+  alone = [spec.make(seed) for seed in (3, 4)]
+  for env in alone:
+    env.reset()
+  calls = []
+  act = batch.envs[0].controller.act
+  batch._controller = mock.Mock(act=lambda x: calls.append(x.shape) or act(x))  # pylint: disable=protected-access
+  rng = np.random.default_rng(0)
+  ended = 0
+  for _ in range(4):  # 1.2 s episodes of 0.5 s commands: 10 + 10 + 4 steps.
+    commands = rng.uniform(-3, 3, (4, 2))
+    steps, episodes, _ = batch.step({'ant': commands})
+    ended += len(episodes)
+    for e, env in enumerate(alone):
+      timestep = env.step(commands[2 * e:2 * e + 2])
+      np.testing.assert_array_equal(steps['ant'].reward[2 * e:2 * e + 2],
+                                    timestep.reward)
+      np.testing.assert_array_equal(steps['ant'].discount[2 * e],
+                                    timestep.discount)
+      if timestep.last():
+        timestep = env.reset()
+      for got, want in zip(batch._observations[e], timestep.observation):  # pylint: disable=protected-access
+        for key in want:
+          np.testing.assert_array_equal(got[key], want[key], err_msg=key)
+  assert ended == 2
+  assert calls[:10] == [(4, batch.envs[0].controller.observation_size)] * 10
+  assert len(calls) == 10 + 10 + 4 + 10

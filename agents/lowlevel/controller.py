@@ -125,7 +125,7 @@ class Controller:
   def __call__(self, observation: Mapping[str, np.ndarray]) -> np.ndarray:
     """One agent's observation dict -> action [8] float32 in [-1, 1]."""
     flat = obs_lib.flatten(observation, self.observation_keys)
-    return self._run(flat[None])[0]
+    return self.act(flat[None])[0]
 
   def batch(self, observations: Union[Sequence[Mapping[str, np.ndarray]],
                                       Mapping[str, np.ndarray]]
@@ -140,9 +140,11 @@ class Controller:
       flat = obs_lib.flatten(observations, self.observation_keys)
     else:
       flat = obs_lib.flatten_agents(observations, self.observation_keys)
-    return self._run(flat)
+    return self.act(flat)
 
-  def _run(self, flat):
+  def act(self, flat: np.ndarray) -> np.ndarray:
+    """Flat observations [B, observation_size] (the keys concatenated in
+    `observation_keys` order) -> actions [B, 8] float32 in [-1, 1]."""
     if flat.shape[-1] != self.observation_size:
       raise ValueError(f'Expected {self.observation_size} features, got '
                        f'{flat.shape[-1]}.')

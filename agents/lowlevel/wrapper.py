@@ -32,6 +32,7 @@ import dm_env
 from dm_env import specs
 import numpy as np
 
+from coop_suite import kernels
 from coop_suite.tasks import exteroception
 
 DEFAULT_COMMAND_BOUND = {'position': 3.0, 'velocity': 1.0}
@@ -68,11 +69,8 @@ class CommandWrapper:
     self._action_spec = [
         specs.BoundedArray((2,), np.float64, -bound, bound, name=f'command_{i}')
         for i in range(env.n_agents)]
-    keys = controller.observation_keys
-    self._proprio_keys = [k for k in keys if k != controller.command_key]
-    # Feature groups the controller reads besides its command ('proprio').
-    self._input_groups = tuple(sorted({k.split('/')[0]
-                                       for k in self._proprio_keys}))
+    self._input_proprio, self._proprio_columns, self._input_command = (
+        _input_layout(controller))
     self._world_commands = np.zeros((env.n_agents, 2))
     self._reset_next_step = True
 
@@ -146,52 +144,88 @@ class CommandWrapper:
     """Runs one command period; `commands` [n_agents, 2] (see module doc)."""
     if self._reset_next_step:
       return self.reset()
+    self.begin(commands)
+    while not self.advance(self._controller.act(self.controller_input())):
+      pass
+    return self.end()
+
+  # --- One period in phases (for copies stepped in lockstep) ---------------
+  #
+  # `step` is `begin`, then `advance(controller.act(controller_input()))`
+  # until it returns True, then `end`. `runners.rollout.EnvBatch` runs the
+  # same phases for all its copies at once, so that one controller call per
+  # low-level step serves every copy (`controller_input(out=...)` writes
+  # into the rows of one shared array).
+
+  def begin(self, commands) -> None:
+    """Starts a command period with `commands` [n_agents, 2]."""
+    if self._reset_next_step:
+      raise RuntimeError('The episode has ended: call reset() first.')
     commands = self._validate(commands)
     frames = self._frames()
-    world = _rotate_from_heading(commands, frames.cos, frames.sin)
+    world = np.stack(kernels.rotate.py_func(
+        frames.cos, frames.sin, commands[:, 0], commands[:, 1]), -1)
     if self._paradigm == 'position':
       self._world_commands = frames.position[:, :2] + world
     else:
       self._world_commands = world
-    total = np.zeros(self.n_agents)
-    discount = 1.0
-    timestep = None
-    for step in range(self._low_level_steps):
-      actions = self._controller.batch(self._controller_inputs())
-      # Only the period's last observation is returned: the steps before it
-      # skip the exteroception (the environment still observes a LAST step).
-      timestep = self._env.step(
-          actions, observe=step == self._low_level_steps - 1)
-      total += np.asarray(timestep.reward, np.float64)
-      discount *= float(timestep.discount)
-      if timestep.last():
-        break
-    last = timestep.last()
-    self._reset_next_step = last
-    return dm_env.TimeStep(
-        step_type=dm_env.StepType.LAST if last else dm_env.StepType.MID,
-        reward=[np.float32(r) for r in total],
-        discount=np.float32(discount),
-        observation=timestep.observation)
+    self._period_steps = 0
+    self._period_reward = np.zeros(self.n_agents)
+    self._period_discount = 1.0
+    self._period_last = None  # The period's latest low-level TimeStep.
 
-  # --- Internals -------------------------------------------------------------
+  def controller_input(self, out: Optional[np.ndarray] = None) -> np.ndarray:
+    """The controller's input [n_agents, observation_size] float32 for the
+    current state: the task's packed proprioception, its columns taken in
+    the controller's key order, and the command in the agent's current
+    heading frame (no per-key dict).
 
-  def _frames(self):
-    return self._env.task.frames(self._env.physics)
-
-  def _controller_inputs(self):
-    """Controller observations [n_agents, k] per key: proprioception as the
-    task computes it for all agents at once, plus the command."""
+    Args:
+      out: an array of that shape to write into (e.g. rows of a larger
+        batch); a new one if None.
+    """
     frames = self._frames()
     if self._paradigm == 'position':
       command = frames.to_heading_frame(self._world_commands)
     else:
       command = exteroception.rotate_to_heading(self._world_commands,
                                                 frames.cos, frames.sin)
-    features = self._env.task.features(self._env.physics, self._input_groups)
-    inputs = {k: features[k] for k in self._proprio_keys}
-    inputs[self._controller.command_key] = command
-    return inputs
+    if out is None:
+      out = np.empty((self.n_agents, self._controller.observation_size),
+                     np.float32)
+    proprioception = self._env.task.proprioception(self._env.physics)
+    out[:, self._input_proprio] = proprioception[:, self._proprio_columns]
+    out[:, self._input_command] = command
+    return out
+
+  def advance(self, actions) -> bool:
+    """One low-level step with joint actions [n_agents, 8]; True when the
+    period is over (its last step, or the episode ended)."""
+    self._period_steps += 1
+    last_step = self._period_steps == self._low_level_steps
+    # Only the period's last observation is returned: the steps before it
+    # skip the exteroception (the environment still observes a LAST step).
+    timestep = self._env.step(actions, observe=last_step)
+    self._period_reward += np.asarray(timestep.reward, np.float64)
+    self._period_discount *= float(timestep.discount)
+    self._period_last = timestep
+    return last_step or timestep.last()
+
+  def end(self) -> dm_env.TimeStep:
+    """Ends the period: rewards summed over its steps, discounts multiplied,
+    the last step's observation."""
+    last = self._period_last.last()
+    self._reset_next_step = last
+    return dm_env.TimeStep(
+        step_type=dm_env.StepType.LAST if last else dm_env.StepType.MID,
+        reward=[np.float32(r) for r in self._period_reward],
+        discount=np.float32(self._period_discount),
+        observation=self._period_last.observation)
+
+  # --- Internals -------------------------------------------------------------
+
+  def _frames(self):
+    return self._env.task.frames(self._env.physics)
 
   def _validate(self, commands) -> np.ndarray:
     n = self.n_agents
@@ -212,9 +246,33 @@ class CommandWrapper:
     return commands
 
 
-def _rotate_from_heading(vectors, cos, sin):
-  """Heading-frame vectors [n, 2] -> world frame (rotate by +yaw)."""
-  out = np.empty_like(vectors)
-  out[:, 0] = cos * vectors[:, 0] - sin * vectors[:, 1]
-  out[:, 1] = sin * vectors[:, 0] + cos * vectors[:, 1]
-  return out
+_PROPRIO_COLUMNS = dict(kernels.proprio_columns(0, 'proprio/'))
+"""'proprio/<name>' -> its columns in `CoopTask.proprioception`'s array."""
+
+
+def _input_layout(controller):
+  """Where the controller's inputs come from, in its key order: (its
+  proprioception columns, the packed proprioception's columns that fill
+  them, its command columns)."""
+  inputs, source, command, start = [], [], None, 0
+  for key, size in zip(controller.observation_keys,
+                       controller.config['observation_sizes']):
+    columns = np.arange(start, start + size)
+    start += size
+    if key == controller.command_key:
+      command = columns
+    elif key in _PROPRIO_COLUMNS:
+      where = _PROPRIO_COLUMNS[key]
+      if where.stop - where.start != size:
+        raise ValueError(f'The controller reads {size} values of {key!r}; '
+                         f'the tasks give {where.stop - where.start}.')
+      inputs.append(columns)
+      source.append(np.arange(where.start, where.stop))
+    else:
+      raise ValueError(
+          f'The controller reads {key!r}; a lower layer may read only '
+          f'{sorted(_PROPRIO_COLUMNS)} and {controller.command_key!r}.')
+  if command is None:
+    raise ValueError(f'The controller does not read its command '
+                     f'{controller.command_key!r}.')
+  return np.concatenate(inputs), np.concatenate(source), command

@@ -426,6 +426,12 @@ class CoopTask(composer.Task):
       return self._proprioception.state(physics, self._last_actions)
     return self.per_state("agent_state", compute)
 
+  def proprioception(self, physics):
+    """Every agent's proprioception packed [n_agents, kernels.PROPRIO_SIZE]
+    in `kernels.PROPRIO_LAYOUT`'s column order: the array the `proprio/*`
+    features are views of, for the lower layer to read without a dict."""
+    return self._agent_state(physics)[:, _PROPRIO_START:]
+
   def features(self, physics, groups=FEATURE_GROUPS):
     """Observations of every agent: 'group/name' -> [n_agents, dim].
 
@@ -598,7 +604,8 @@ _NO_GEOMS = np.zeros(0, np.int64)
 
 # The proprioception's columns in `CoopTask._agent_state`'s packed array
 # (after the five frame columns).
-_PROPRIO_COLUMNS = kernels.proprio_columns(5, "proprio/")
+_PROPRIO_START = 5
+_PROPRIO_COLUMNS = kernels.proprio_columns(_PROPRIO_START, "proprio/")
 _EVERYTHING = slice(None)
 
 
