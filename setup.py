@@ -38,6 +38,9 @@ setuptools.setup(
         "tqdm",
         "matplotlib",
         "tensorboardX",
+        # Every CLI (runners.cli); its private parse-error hook turns a
+        # refused value into one line, else tyro's own box.
+        "tyro>=1.0.17",
     ],
     extras_require={
         "pettingzoo": ["pettingzoo>=1.24", "gymnasium>=0.29"],

@@ -3,6 +3,7 @@
 Layout, one concept per module:
   core.py           Actor / Learner / VariableSource interfaces.
   checkpointing.py  atomic learner checkpoint files (kind, format, state).
+  fields.py         config fields with their allowed values; the one check.
   normalization.py  running statistics (observations, global state, values).
   observations.py   observation dicts -> the flat vectors the networks read.
   networks/         Flax MLP torso, tanh-Gaussian head, feed-forward

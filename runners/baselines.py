@@ -30,7 +30,9 @@ from typing import Any
 
 import numpy as np
 
+from agents import fields
 from runners import cli
+from runners import config as config_lib
 
 os.environ.setdefault('MUJOCO_GL', 'egl')
 
@@ -409,19 +411,19 @@ observation) once per command period, returning commands [n_agents, 2]."""
 class BaselineArgs:
   """What to play (every field is a flag)."""
 
-  task: str = 'transport'
+  task: str = fields.field('transport', fields.one_of(*REFERENCES))
   """Task: transport, corridor or ravine."""
   n_agents: int = 4
   """Agents (ravine: crossers; the pushers are --n-pushers)."""
-  policy: str = 'greedy'
+  policy: str = fields.field('greedy', fields.one_of(*POLICIES))
   """Reference policy: random, greedy or oracle."""
-  episodes: int = 100
+  episodes: int = fields.field(100, fields.COUNT)
   """Episodes to play."""
-  seed: int = 1000
+  seed: int = fields.field(1000, fields.SEED)
   """Seed of the first episode; episode i uses seed + i."""
-  time_limit: float = 0.0
+  time_limit: float = fields.field(0.0, config_lib.TIME_LIMIT)
   """Episode length (s); 0 keeps the task's default."""
-  command_period: float = 0.5
+  command_period: float = fields.field(0.5, fields.POSITIVE)
   """Seconds between commands."""
   n_pushers: int = 2
   """Ravine only: number of pushers."""
@@ -434,16 +436,7 @@ class BaselineArgs:
   this folder (e.g. results/baselines), one table per task."""
 
   def __post_init__(self):
-    from runners import config as config_lib  # pylint: disable=g-import-not-at-top
-    if self.task not in REFERENCES:
-      raise ValueError(f'--task must be one of {tuple(REFERENCES)}, got '
-                       f'{self.task!r}.')
-    if self.policy not in POLICIES:
-      raise ValueError(f'--policy must be one of {POLICIES}, got '
-                       f'{self.policy!r}.')
-    if self.episodes < 1:
-      raise ValueError(f'--episodes must be >= 1, got {self.episodes}.')
-    config_lib.check_time_limit(self.time_limit)
+    fields.check(self)
 
   def env_options(self) -> dict[str, Any]:
     options = {}

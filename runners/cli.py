@@ -1,87 +1,68 @@
-"""Frozen dataclass of arguments -> argparse CLI (CleanRL style, no tyro).
+"""Frozen dataclass of arguments <-> command line, with tyro (CleanRL style).
 
 Each field becomes `--field-name` with its default, and the string literal
 written under the field (its attribute docstring) becomes the help text.
-Booleans take `--flag` / `--no-flag`; tuples take several values.
+Booleans take `--flag` / `--no-flag`; tuples take several values. A nested
+dataclass (`TrainArgs.hierarchy`) adds its fields as flags of their own
+names, without a prefix, so names must be unique across the nesting. A
+value its field does not allow (`agents.fields`) is one line naming the
+flag, exit status 2.
 """
-import argparse
-import ast
+import contextlib
 import dataclasses
-import inspect
 import os
 import sys
-import textwrap
-import typing
+
+import tyro
 
 
-def field_docs(cls) -> dict[str, str]:
-  """Attribute docstrings of a dataclass: {field name: docstring}."""
-  docs = {}
-  for klass in reversed(cls.__mro__):
-    try:
-      source = textwrap.dedent(inspect.getsource(klass))
-    except (OSError, TypeError):
-      continue
-    body = ast.parse(source).body
-    if not body or not isinstance(body[0], ast.ClassDef):
-      continue
-    statements = body[0].body
-    for node, after in zip(statements, statements[1:]):
-      if (isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name)
-          and isinstance(after, ast.Expr)
-          and isinstance(after.value, ast.Constant)
-          and isinstance(after.value.value, str)):
-        docs[node.target.id] = ' '.join(after.value.value.split())
-  return docs
+class _Rejected(Exception):
+  """A value that a config's `__post_init__` refused, to report as one line."""
 
 
-def parse(cls, argv=None, description=None):
-  """Parses `argv` into an instance of the dataclass `cls`."""
-  parser = argparse.ArgumentParser(
-      description=description,
-      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-  docs = field_docs(cls)
-  hints = typing.get_type_hints(cls)
-  for field in dataclasses.fields(cls):
-    flag = '--' + field.name.replace('_', '-')
-    kind = hints[field.name]
-    help_text = docs.get(field.name, ' ')
-    if kind is bool:
-      parser.add_argument(flag, action=argparse.BooleanOptionalAction,
-                          default=field.default, help=help_text)
-    elif typing.get_origin(kind) is tuple:
-      element = typing.get_args(kind)[0]
-      parser.add_argument(flag, type=element, nargs='+',
-                          default=field.default, help=help_text)
-    else:
-      parser.add_argument(flag, type=kind, default=field.default,
-                          help=help_text)
-  values = vars(parser.parse_args(argv))
-  values = {k: tuple(v) if isinstance(v, list) else v
-            for k, v in values.items()}
+def _reject(event):
+  # tyro boxes a constructor's ValueError; this CLI says it in one line.
+  if type(event).__name__ == 'InstantiationFailure':
+    raise _Rejected(event.message)
+
+
+def parse(cls, argv=None, description=None, prog=None):
+  """Parses `argv` (default: sys.argv[1:]) into an instance of the
+  dataclass `cls`; --help lists every flag with its docstring and default."""
+  prog = prog or os.path.basename(sys.argv[0])
+  # tyro's parse-error hook is private: without it, errors come in its box.
+  hook = getattr(getattr(tyro, '_errors', None), 'on_parse_error', None)
   try:
-    return cls(**values)
-  except (ValueError, TypeError) as e:
-    parser.error(str(e))  # Usage and one line naming the flag; exit 2.
+    with hook(_reject) if hook else contextlib.nullcontext():
+      return tyro.cli(cls, args=argv, prog=prog, description=description,
+                      config=(tyro.conf.OmitArgPrefixes,))
+  except _Rejected as e:
+    fail(prog, e)
 
 
-def command_line(instance, prog: str, skip=()) -> str:
-  """The inverse of `parse`: `prog` with the flags of the fields of the
-  dataclass `instance` that differ from their defaults (`skip` names fields
-  left out), e.g. 'coop-train --task ravine --n-agents 2'."""
-  words = [prog]
+def _flags(instance, skip):
   for field in dataclasses.fields(instance):
     value = getattr(instance, field.name)
+    if dataclasses.is_dataclass(value):
+      yield from _flags(value, skip)
+      continue
     if field.name in skip or value == field.default:
       continue
     flag = '--' + field.name.replace('_', '-')
     if isinstance(value, bool):
-      words.append(flag if value else '--no-' + flag[2:])
+      yield flag if value else '--no-' + flag[2:]
     elif isinstance(value, tuple):
-      words += [flag, *map(str, value)]
+      yield ' '.join([flag, *map(str, value)])
     else:
-      words += [flag, str(value)]
-  return ' '.join(words)
+      yield f'{flag} {value}'
+
+
+def command_line(instance, prog: str, skip=()) -> str:
+  """The inverse of `parse`: `prog` with the flags of the fields of the
+  dataclass `instance` (nested ones included) that differ from their
+  defaults (`skip` names fields left out), e.g.
+  'coop-train --task ravine --n-agents 2 --agent mappo'."""
+  return ' '.join([prog, *_flags(instance, skip)])
 
 
 def user_errors():

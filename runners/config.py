@@ -2,9 +2,12 @@
 
 `TrainArgs` is what `coop-train` parses (every field is a flag, its
 docstring the help text, see `runners.cli`) and what a checkpoint stores, so
-a run can be resumed or evaluated from its directory alone. The agent's own
-hyper-parameters default to `HierarchyConfig`'s; `hierarchy_config()` turns
-the args into that config.
+a run can be resumed or evaluated from its directory alone. It holds the
+agent's config whole (`TrainArgs.hierarchy`, a `HierarchyConfig`), whose
+fields are flags of their own names too (`--agent`, `--seed`,
+`--learning-rate`). Fields marked `resumable` may change when a run is
+resumed; `check_resumable` compares the others. `from_dict` also reads the
+flat form that runs stored before the agent's config was nested.
 
 Units: `total_steps` counts low-level environment steps (control steps of
 `control_timestep` = 0.05 s of one environment copy, all its agents
@@ -12,28 +15,19 @@ together); the policy acts once per `command_period` seconds ('flat': every
 control step).
 """
 import dataclasses
-import math
 import os
-import re
 from typing import Any
 
+from agents import fields
 from agents.hierarchy import config as hierarchy_config_lib
 
-_H = hierarchy_config_lib.HierarchyConfig()
 PARADIGMS = ('position', 'velocity')
-# Fields of TrainArgs passed on to HierarchyConfig unchanged.
-HIERARCHY_FIELDS = (
-    'agent', 'seed', 'sequence_length', 'num_epochs', 'num_minibatches',
-    'learning_rate', 'entropy_cost', 'discount', 'gae_lambda',
-    'reward_scaling', 'upper_layer_sizes', 'middle_layer_size', 'head_sizes',
-    'critic_sizes', 'flat_sizes', 'critic', 'normalize_values', 'target_kl',
-    'min_action_std', 'max_grad_norm')
-# Fields that may change when a run is resumed (the rest must match).
-RESUMABLE_CHANGES = ('actors', 'envs_per_actor', 'total_steps', 'logdir',
-                     'ray_address', 'resume', 'resume_from',
-                     'checkpoint_every',
-                     'keep_checkpoints', 'keep_best', 'max_actor_restarts',
-                     'progress', 'controller', 'window', 'init_from')
+TIME_LIMIT = fields.equal(0, "the task's default") | fields.above(0)
+"""Episode seconds: 0 for the task's default, else finite and > 0."""
+
+
+def _resumable(default, allowed=None):
+  return fields.field(default, allowed, resumable=True)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -44,43 +38,43 @@ class TrainArgs:
   """Task: transport, corridor or ravine (any coop_suite task works)."""
   n_agents: int = 4
   """Agents per environment (ravine: crossers; pushers are --n-pushers)."""
-  agent: str = 'hrl'
-  """Variant: hrl (default), no_memory, flat or mappo."""
-  actors: int = 2
+  hierarchy: hierarchy_config_lib.HierarchyConfig = dataclasses.field(
+      default_factory=hierarchy_config_lib.HierarchyConfig)
+  """The agent, one config for every species; its fields are flags of
+  their own names (--agent, --seed, --learning-rate, ...)."""
+  actors: int = _resumable(2, fields.NON_NEGATIVE)
   """Actor processes on Ray; 0 runs the same actor and learner in this
   process without Ray (debugging, tests)."""
-  envs_per_actor: int = 16
+  envs_per_actor: int = _resumable(16, fields.COUNT)
   """Environment copies each actor steps (one batched policy call each).
   With 2 actors, 4 agents and --sequence-length 32: 4,096 commands per
   update."""
-  total_steps: int = 20_000_000
+  total_steps: int = _resumable(20_000_000, fields.COUNT)
   """Low-level environment steps to train for (0.05 s control steps of one
   environment copy), rounded up to whole iterations."""
-  seed: int = 0
-  """Seed of the networks, the action noise and the environments."""
-  logdir: str = ''
+  logdir: str = _resumable('')
   """Run directory; default runs/<task>_<agent>_n<n_agents>_s<seed>."""
-  ray_address: str = ''
+  ray_address: str = _resumable('')
   """Join this Ray cluster: 'auto' or its head's HOST:6379, run on one of
   its nodes (docs/training.md, "Running on a Ray cluster"); empty joins
   $RAY_ADDRESS if set, else starts a local Ray instance owned by this
   command."""
-  resume: bool = False
+  resume: bool = _resumable(False)
   """Continue from the newest checkpoint in logdir that reads completely."""
-  resume_from: str = ''
+  resume_from: str = _resumable('')
   """Continue from this checkpoint directory of the run (e.g.
   <logdir>/checkpoints/ckpt_00000004); implies --resume, and --logdir
   defaults to its run."""
-  paradigm: str = 'position'
+  paradigm: str = fields.field('position', fields.one_of(*PARADIGMS))
   """Command paradigm of the lower layer: position or velocity."""
-  controller: str = ''
+  controller: str = _resumable('')
   """Folder of a lower-layer controller (agents.lowlevel.save); empty uses
   the weights shipped for --paradigm."""
-  command_period: float = 0.5
+  command_period: float = fields.field(0.5, fields.POSITIVE)
   """Seconds between two commands of the middle layer."""
   stage: str = 'joint'
   """Ravine only: curriculum stage joint, pushers or crossers."""
-  init_from: tuple[str, ...] = ()
+  init_from: tuple[str, ...] = _resumable(())
   """Start species from other runs, as SPECIES=PATH pairs (the ravine's
   curriculum: pusher=RUN_A crosser=RUN_B); PATH is a run directory (its
   newest complete checkpoint) or a checkpoint directory. Each named species
@@ -88,68 +82,26 @@ class TrainArgs:
   resumed run continues from its own checkpoint instead."""
   n_pushers: int = 2
   """Ravine only: number of pushers."""
-  time_limit: float = 0.0
+  time_limit: float = fields.field(0.0, TIME_LIMIT)
   """Episode length in seconds; 0 keeps the task's default."""
-  checkpoint_every: int = 1
+  checkpoint_every: int = _resumable(1, fields.COUNT)
   """Write a checkpoint every this many iterations (and at the end)."""
-  keep_checkpoints: int = 3
+  keep_checkpoints: int = _resumable(3, fields.COUNT)
   """Checkpoints kept; older ones are deleted."""
-  keep_best: bool = True
+  keep_best: bool = _resumable(True)
   """Also keep, in checkpoints/best/, the iteration whose full episode window
   had the highest success rate (then return): PPO on these tasks can fall
   back after a peak (docs/results.md)."""
-  max_actor_restarts: int = 3
+  max_actor_restarts: int = _resumable(
+      3, fields.equal(-1, 'without limit') | fields.NON_NEGATIVE)
   """Times Ray restarts each dead actor process (-1: without limit)."""
-  progress: bool = True
+  progress: bool = _resumable(True)
   """Progress bar on a terminal, else one line every 30 s."""
-  window: int = 100
+  window: int = _resumable(100, fields.COUNT)
   """Logged episode figures are means over the last this many episodes."""
 
-  # The agent (HierarchyConfig; defaults are its own).
-  sequence_length: int = _H.sequence_length
-  """T, commands per training sequence and per actor rollout."""
-  num_epochs: int = _H.num_epochs
-  """PPO epochs over each iteration's data."""
-  num_minibatches: int = _H.num_minibatches
-  """Minibatches per epoch; each species' agent count over all actors and
-  copies must divide by it."""
-  learning_rate: float = _H.learning_rate
-  """Adam step size."""
-  entropy_cost: float = _H.entropy_cost
-  """Entropy bonus weight."""
-  discount: float = _H.discount
-  """Discount per command ('flat': per control step)."""
-  gae_lambda: float = _H.gae_lambda
-  """GAE lambda."""
-  reward_scaling: float = _H.reward_scaling
-  """Rewards are multiplied by this inside PPO (logged returns are not)."""
-  upper_layer_sizes: tuple[int, ...] = _H.upper_layer_sizes
-  """Upper layer MLP widths."""
-  middle_layer_size: int = _H.middle_layer_size
-  """Middle layer GRU size (no_memory: MLP width)."""
-  head_sizes: tuple[int, ...] = _H.head_sizes
-  """Hidden widths of the command and value heads."""
-  critic_sizes: tuple[int, ...] = _H.critic_sizes
-  """mappo: centralised critic widths."""
-  flat_sizes: tuple[int, ...] = _H.flat_sizes
-  """flat: policy and value MLP widths."""
-  critic: str = _H.critic
-  """Critic structure: separate (own upper and middle layer), stop_gradient
-  (value head on the policy's features, no gradient into them) or shared
-  (the first run's layout)."""
-  normalize_values: bool = _H.normalize_values
-  """The critic predicts standardised returns (running statistics)."""
-  target_kl: float = _H.target_kl
-  """KL target of the adaptive learning rate; 0 keeps it constant."""
-  min_action_std: float = _H.min_action_std
-  """Floor of the command's std (pre-tanh units)."""
-  max_grad_norm: float = _H.max_grad_norm
-  """Gradients are rescaled to at most this global L2 norm."""
-
   def __post_init__(self):
-    if self.paradigm not in PARADIGMS:
-      raise ValueError(f'--paradigm must be one of {PARADIGMS}, got '
-                       f'{self.paradigm!r}.')
+    fields.check(self)
     if self.resume_from:
       object.__setattr__(self, 'resume', True)
     if not self.logdir and self.resume_from:
@@ -158,28 +110,8 @@ class TrainArgs:
     if not self.logdir:
       object.__setattr__(self, 'logdir', f'runs/{self.task}_{self.agent}_'
                          f'n{self.n_agents}_s{self.seed}')
-    for name in ('envs_per_actor', 'total_steps', 'checkpoint_every',
-                 'keep_checkpoints', 'window'):
-      if getattr(self, name) < 1:
-        raise ValueError(f'--{name.replace("_", "-")} must be >= 1, got '
-                         f'{getattr(self, name)}.')
-    if self.actors < 0:
-      raise ValueError(f'--actors must be >= 0, got {self.actors}.')
-    if not 0 <= self.seed < 2**32:
-      raise ValueError(f'--seed must be in [0, 2**32), got {self.seed}.')
-    if not (math.isfinite(self.command_period) and self.command_period > 0):
-      raise ValueError('--command-period must be a finite number of seconds '
-                       f'> 0, got {self.command_period}.')
-    check_time_limit(self.time_limit)
     object.__setattr__(self, 'init_from', tuple(self.init_from))
     self.init_sources()  # Checks the pairs.
-    if self.max_actor_restarts < -1:
-      raise ValueError('--max-actor-restarts must be >= 0, or -1 for '
-                       f'without limit, got {self.max_actor_restarts}.')
-    for name in ('upper_layer_sizes', 'head_sizes', 'critic_sizes',
-                 'flat_sizes'):
-      object.__setattr__(self, name, tuple(getattr(self, name)))
-    hierarchy_config(self)  # Checks the agent's fields, naming the flag.
 
   def init_sources(self) -> dict[str, str]:
     """`init_from` as {species: path}; ValueError naming the bad pair."""
@@ -193,6 +125,16 @@ class TrainArgs:
         raise ValueError(f'--init-from names species {species!r} twice.')
       sources[species] = path
     return sources
+
+  @property
+  def agent(self) -> str:
+    """The agent's variant (`HierarchyConfig.agent`)."""
+    return self.hierarchy.agent
+
+  @property
+  def seed(self) -> int:
+    """The seed of the networks, the action noise and the environments."""
+    return self.hierarchy.seed
 
   @property
   def num_actors(self) -> int:
@@ -209,42 +151,52 @@ class TrainArgs:
     return options
 
   def to_dict(self) -> dict[str, Any]:
-    """JSON-able dict (tuples become lists)."""
+    """JSON-able dict, the agent's config nested under 'hierarchy' (tuples
+    become lists)."""
     return json_safe(dataclasses.asdict(self))
 
   @classmethod
   def from_dict(cls, values: dict[str, Any]) -> 'TrainArgs':
-    """The inverse of `to_dict`; unknown keys (older runs) are dropped."""
-    names = {f.name for f in dataclasses.fields(cls)}
-    return cls(**{k: v for k, v in values.items() if k in names})
+    """The inverse of `to_dict`; also reads the flat form of runs stored
+    before the agent's config was nested. Unknown keys (older runs) are
+    dropped."""
+    names = _AGENT_NAMES | {f.name for f in dataclasses.fields(cls)}
+    return train_args(**{k: v for k, v in flat_dict(values).items()
+                         if k in names and k != 'hierarchy'})
 
 
-def check_time_limit(seconds: float, flag: str = '--time-limit') -> None:
-  """Raises ValueError unless `seconds` is 0 (the task's default episode
-  length) or a finite number of seconds > 0."""
-  if not (seconds == 0 or (math.isfinite(seconds) and seconds > 0)):
-    raise ValueError(f'{flag} must be 0 (the task\'s default) or a finite '
-                     f'number of seconds > 0, got {seconds}.')
+_AGENT_NAMES = frozenset(
+    f.name for f in dataclasses.fields(hierarchy_config_lib.HierarchyConfig))
 
 
-def hierarchy_config(args: TrainArgs) -> hierarchy_config_lib.HierarchyConfig:
-  """The agent's config (one per species; species ids are folded in later)."""
-  try:
-    return hierarchy_config_lib.HierarchyConfig(
-        **{name: getattr(args, name) for name in HIERARCHY_FIELDS})
-  except ValueError as e:
-    message = re.sub(r'HierarchyConfig\.(\w+)',
-                     lambda m: '--' + m.group(1).replace('_', '-'), str(e))
-    raise ValueError(message) from None
+def train_args(**values) -> TrainArgs:
+  """`TrainArgs` from flat values, the agent's fields among the run's as on
+  the command line, e.g. train_args(task='ravine', agent='mappo',
+  learning_rate=1e-3); a `hierarchy` value is the config they change."""
+  agent = {k: values.pop(k) for k in list(values) if k in _AGENT_NAMES}
+  hierarchy = values.pop('hierarchy', hierarchy_config_lib.HierarchyConfig())
+  return TrainArgs(**values, hierarchy=dataclasses.replace(hierarchy, **agent))
+
+
+def flat_dict(values: dict[str, Any]) -> dict[str, Any]:
+  """A stored `TrainArgs` dict, nested (`to_dict`) or flat (older runs), as
+  {field name: value}: the names are unique, as the flags are."""
+  return {**{k: v for k, v in values.items() if k != 'hierarchy'},
+          **values.get('hierarchy', {})}
 
 
 def check_resumable(saved: dict[str, Any], args: TrainArgs) -> None:
-  """Raises ValueError naming the flags that differ from the saved run."""
-  current = args.to_dict()
-  differ = sorted(k for k in current if k not in RESUMABLE_CHANGES
+  """Raises ValueError naming the flags that differ from the saved run's
+  `TrainArgs` dict (nested or flat); fields marked `resumable` may differ,
+  and so may fields the saved run did not have."""
+  saved = flat_dict(saved)
+  current = flat_dict(args.to_dict())
+  changeable = {f.name for cls in (TrainArgs, type(args.hierarchy))
+                for f in dataclasses.fields(cls) if f.metadata.get('resumable')}
+  differ = sorted(k for k in current if k not in changeable
                   and k in saved and saved[k] != current[k])
   if differ:
-    flags = ', '.join(f'--{k.replace("_", "-")} (run: {saved[k]!r}, now: '
+    flags = ', '.join(f'{fields.flag(k)} (run: {saved[k]!r}, now: '
                       f'{current[k]!r})' for k in differ)
     raise ValueError(f'Cannot resume {args.logdir} with other settings: '
                      f'{flags}.')

@@ -16,6 +16,7 @@ import json
 
 import numpy as np
 
+from agents import fields
 from runners import cli
 
 TASKS = {'position': 'walk_to_target', 'velocity': 'walk_velocity'}
@@ -25,16 +26,19 @@ TASKS = {'position': 'walk_to_target', 'velocity': 'walk_velocity'}
 class EvalArgs:
   """What to evaluate."""
 
-  paradigm: str = 'position'
+  paradigm: str = fields.field('position', fields.one_of(*TASKS))
   """'position' or 'velocity'."""
   controller: str = ''
   """Controller directory; default: the weights shipped in agents/lowlevel."""
-  episodes: int = 20
+  episodes: int = fields.field(20, fields.COUNT)
   """Episodes to run."""
-  seed: int = 1000
+  seed: int = fields.field(1000, fields.SEED)
   """Seed of the first episode's environment."""
-  time_limit: float = 10.0
+  time_limit: float = fields.field(10.0, fields.POSITIVE)
   """Episode length (s)."""
+
+  def __post_init__(self):
+    fields.check(self)
 
 
 def _mean_and_error(rows):
@@ -112,7 +116,10 @@ def evaluate(args: EvalArgs) -> dict:
 
 def main(argv=None):
   args = cli.parse(EvalArgs, argv, description=__doc__.splitlines()[0])
-  results = evaluate(args)
+  try:
+    results = evaluate(args)
+  except cli.user_errors() as e:
+    cli.fail('python -m runners.eval_lowlevel', e)
   for name, (mean, se) in results.items():
     print(f'{name:>18}: {mean:8.3f} +- {se:.3f}')
   print(json.dumps({k: v[0] for k, v in results.items()}))

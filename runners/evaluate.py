@@ -26,10 +26,15 @@ import sys
 
 import numpy as np
 
+from agents import fields
 from runners import cli
+from runners import config as config_lib
 from runners import marl_eval
 
 os.environ.setdefault('MUJOCO_GL', 'egl')
+
+
+_TRAINING = fields.equal(0, 'the training one')
 
 
 @dataclasses.dataclass(frozen=True)
@@ -40,21 +45,21 @@ class EvalArgs:
   """Run or checkpoint directories, one per trained model."""
   task: str = ''
   """Task; empty for the training task."""
-  n_agents: int = 0
+  n_agents: int = fields.field(0, _TRAINING | fields.COUNT)
   """Agents (ravine: crossers); 0 for the training count."""
-  episodes: int = 100
+  episodes: int = fields.field(100, fields.COUNT)
   """Episodes per model and seed."""
-  seeds: tuple[int, ...] = (0,)
+  seeds: tuple[int, ...] = fields.field((0,), fields.SEED)
   """Environment (and action noise) seeds."""
-  envs: int = 10
+  envs: int = fields.field(10, fields.COUNT)
   """Environment copies stepped together."""
   stochastic: bool = False
   """Sample commands instead of taking the policy's mean."""
   stage: str = ''
   """Ravine stage; empty for the training one."""
-  n_pushers: int = 0
+  n_pushers: int = fields.field(0, _TRAINING | fields.COUNT)
   """Ravine pushers; 0 for the training count."""
-  time_limit: float = 0.0
+  time_limit: float = fields.field(0.0, config_lib.TIME_LIMIT)
   """Episode length (s); 0 for the training one."""
   controller: str = ''
   """Lower layer folder; empty for the run's own copy (else the shipped
@@ -64,24 +69,17 @@ class EvalArgs:
   json: str = ''
   """Also write every episode's figures to this file in marl-eval's JSON
   layout (runners.marl_eval; docs/training.md, "Evaluation")."""
-  width: int = 640
-  height: int = 480
+  width: int = fields.field(640, fields.COUNT)
+  """Video width in pixels."""
+  height: int = fields.field(480, fields.COUNT)
+  """Video height in pixels."""
 
   def __post_init__(self):
-    from runners import config as config_lib  # pylint: disable=g-import-not-at-top
     if not self.checkpoint:
       raise ValueError('Give at least one --checkpoint DIR.')
-    for name in ('episodes', 'envs', 'width', 'height'):
-      if getattr(self, name) < 1:
-        raise ValueError(f'--{name} must be >= 1, got {getattr(self, name)}.')
-    for name in ('n_agents', 'n_pushers'):
-      if getattr(self, name) < 0:
-        raise ValueError(f'--{name.replace("_", "-")} must be >= 1, or 0 for '
-                         f'the training count, got {getattr(self, name)}.')
-    if not self.seeds or not all(0 <= s < 2**32 for s in self.seeds):
-      raise ValueError(f'--seeds must be one or more integers in [0, 2**32), '
-                       f'got {list(self.seeds)}.')
-    config_lib.check_time_limit(self.time_limit)
+    if not self.seeds:
+      raise ValueError('Give at least one seed to --seeds.')
+    fields.check(self)
 
 
 def load_model(path: str, args: EvalArgs):
@@ -90,7 +88,6 @@ def load_model(path: str, args: EvalArgs):
   from agents.hierarchy import builder as hierarchy_builder  # pylint: disable=g-import-not-at-top
   from agents.hierarchy import config as hierarchy_config  # pylint: disable=g-import-not-at-top
   from runners import checkpoints  # pylint: disable=g-import-not-at-top
-  from runners import config as config_lib  # pylint: disable=g-import-not-at-top
   from runners import envs as envs_lib  # pylint: disable=g-import-not-at-top
   checkpoint = checkpoints.resolve(path)
   state = checkpoints.read_state(checkpoint)
@@ -273,7 +270,7 @@ def evaluate(args: EvalArgs, log=None) -> dict:
                       'task': spec.task, 'n_agents': spec.n_agents,
                       'stage': spec.options.get('stage', ''),
                       'agent': config.agent,
-                      'seed': state['args']['seed'],
+                      'seed': config.seed,
                       'episodes': [metrics_lib.episode_figures(e)
                                    for e in played]})
     if args.video and len(per_model) == 1:

@@ -78,7 +78,7 @@ def environment_spec(args: config_lib.TrainArgs) -> envs_lib.EnvSpec:
   """The run's environments, with its lower layer (the run's copy when
   resuming); writes nothing."""
   files = None
-  uses_commands = config_lib.hierarchy_config(args).uses_commands
+  uses_commands = args.hierarchy.uses_commands
   if uses_commands:
     files = envs_lib.read_controller(
         args.paradigm, _controller_copy(args) if _has_controller_copy(args)
@@ -170,7 +170,7 @@ def initialize_from_runs(args: config_lib.TrainArgs,
 
 
 def _train(args, checkpoint, on_iteration):
-  config = config_lib.hierarchy_config(args)
+  config = args.hierarchy
   spec = environment_spec(args)
   layout, keys, per_action, dt = probe(spec, config)
   for s in layout:

@@ -29,6 +29,7 @@ import signal
 import sys
 from typing import Callable, Optional
 
+from agents import fields
 from runners import cli
 from runners import paper_plan
 
@@ -42,7 +43,7 @@ class PaperArgs:
   only: tuple[str, ...] = ()
   """Cells to consider: task/variant[/stage]/n<N>/s<seed> paths or
   prefixes (transport/hrl, corridor/*/n6) or cell names; empty for all."""
-  budget: int = 0
+  budget: int = fields.field(0, fields.NON_NEGATIVE)
   """Environment steps per cell instead of the plan's (quick runs); 0 keeps
   the plan's."""
   dry_run: bool = False
@@ -71,27 +72,21 @@ class PaperArgs:
   of the cell."""
   baselines: str = 'results/baselines'
   """The difficulty references printed beside the learned figures."""
-  actors: int = 2
+  actors: int = fields.field(2, fields.NON_NEGATIVE)
   """Actor processes per training run (0: one process, no Ray)."""
   ray_address: str = ''
   """Join this Ray cluster (as coop-train --ray-address)."""
-  episodes: int = paper_plan.EPISODES
+  episodes: int = fields.field(paper_plan.EPISODES, fields.COUNT)
   """Evaluation episodes per model and population."""
   eval_seed: int = paper_plan.EVAL_SEED
   """Evaluation seed (never used in training)."""
-  eval_envs: int = 10
+  eval_envs: int = fields.field(10, fields.COUNT)
   """Environment copies stepped together while evaluating."""
   progress: bool = True
   """Progress bar while training."""
 
   def __post_init__(self):
-    for name in ('budget', 'actors'):
-      if getattr(self, name) < 0:
-        raise ValueError(f'--{name} must be >= 0, got {getattr(self, name)}.')
-    for name in ('episodes', 'eval_envs'):
-      if getattr(self, name) < 1:
-        raise ValueError(f'--{name.replace("_", "-")} must be >= 1, got '
-                         f'{getattr(self, name)}.')
+    fields.check(self)
     object.__setattr__(self, 'only', tuple(self.only))
 
 
@@ -126,7 +121,7 @@ def train_args(cell: paper_plan.Cell, args: PaperArgs, resume: bool = False):
     values['init_from'] = tuple(
         f'{species}={os.path.join(args.results, name)}'
         for species, name in cell.init_from)
-  return config_lib.TrainArgs(**values)
+  return config_lib.train_args(**values)
 
 
 def command(cell: paper_plan.Cell, args: PaperArgs) -> str:

@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from agents import fields
 from runners import cli
 from runners import run_dir
 from runners import vector_env
@@ -55,27 +56,27 @@ SUCCESS_METRIC = {'position': 'success', 'velocity': 'velocity_cosine'}
 class Args:
   """Pretraining run settings (every field is a CLI flag)."""
 
-  paradigm: str = 'position'
+  paradigm: str = fields.field('position', fields.one_of(*TASKS))
   """'position' (walk_to_target) or 'velocity' (walk_velocity)."""
   seed: int = 0
   """Seed of the networks, the action noise and the environments (copy i gets
   seed + i)."""
-  total_env_steps: int = 12_000_000
+  total_env_steps: int = fields.field(12_000_000, fields.COUNT)
   """Control steps over all environment copies; training stops at the first
   update that reaches it. The shipped position controller reached 100%
   success by 1M steps and was stopped at 11.3M (docs/results.md)."""
-  num_envs: int = 128
+  num_envs: int = fields.field(128, fields.COUNT)
   """Environment copies stepped per control step."""
   num_workers: int = 2
   """Processes stepping the copies (0: in this process)."""
-  unroll_length: int = 32
+  unroll_length: int = fields.field(32, fields.COUNT)
   """Control steps per copy in one rollout; a PPO update uses
   num_envs * unroll_length steps collected with one parameter version."""
   logdir: str = ''
   """Run directory; default runs/lowlevel_<paradigm>."""
-  checkpoint_every: int = 50
+  checkpoint_every: int = fields.field(50, fields.COUNT)
   """Write a checkpoint every this many updates (and at the end)."""
-  keep_checkpoints: int = 3
+  keep_checkpoints: int = fields.field(3, fields.COUNT)
   """Checkpoints kept (older ones are deleted)."""
   resume: bool = False
   """Continue from the newest checkpoint in logdir."""
@@ -110,18 +111,13 @@ class Args:
   """Hidden layer widths of the policy and of the value MLP."""
 
   def __post_init__(self):
-    if self.paradigm not in TASKS:
-      raise ValueError(f'--paradigm must be one of {sorted(TASKS)}, got '
-                       f'{self.paradigm!r}.')
+    fields.check(self)
+    self.ppo_config()  # Checks the PPO fields.
     if not self.logdir:
       object.__setattr__(self, 'logdir', f'runs/lowlevel_{self.paradigm}')
     if not self.export_dir:
       object.__setattr__(self, 'export_dir',
                          os.path.join(self.logdir, 'controller'))
-    for name in ('total_env_steps', 'num_envs', 'unroll_length',
-                 'checkpoint_every', 'keep_checkpoints'):
-      if getattr(self, name) < 1:
-        raise ValueError(f'--{name.replace("_", "-")} must be >= 1.')
 
   def task(self) -> str:
     return TASKS[self.paradigm]

@@ -7,7 +7,6 @@ Rendering uses MuJoCo's offscreen EGL context (`MUJOCO_GL=egl` is set by
 `coop_suite` unless you chose another backend), so it works on a server.
 """
 
-import argparse
 import collections
 import dataclasses
 import os
@@ -25,8 +24,10 @@ import imageio  # pylint: disable=g-import-not-at-top
 import numpy as np
 import tqdm
 
+from agents import fields
 import coop_suite
 from coop_suite import camera as camera_lib
+from runners import cli
 
 POLICIES = ("random", "zero")
 
@@ -39,20 +40,25 @@ class VideoArgs:
   """Task name: one of coop_suite.TASKS."""
   n_agents: int = 4
   """Number of agents (ravine: crossers)."""
-  policy: str = "random"
+  policy: str = fields.field("random", fields.one_of(*POLICIES))
   """'random' (uniform actions in [-1, 1]) or 'zero'."""
-  seconds: float = 10.0
+  seconds: float = fields.field(10.0, fields.POSITIVE)
   """Simulated seconds to record (the episode restarts if it ends)."""
   out: str = ""
   """mp4 file to write; empty for none."""
   png: str = ""
   """PNG still of the first frame to write; empty for none."""
-  seed: int = 0
+  seed: int = fields.field(0, fields.SEED)
   """Environment and policy seed."""
-  width: int = 640
-  height: int = 480
-  fps: int = 20
+  width: int = fields.field(640, fields.COUNT)
+  """Frame width in pixels."""
+  height: int = fields.field(480, fields.COUNT)
+  """Frame height in pixels."""
+  fps: int = fields.field(20, fields.COUNT)
   """Frames per second of the video (one frame per control step at 20)."""
+
+  def __post_init__(self):
+    fields.check(self)
 
 
 def open_video(path, fps):
@@ -112,15 +118,6 @@ def record(args: VideoArgs, policy=None):
   return frames
 
 
-def parse_args(argv=None):
-  parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-  for field in dataclasses.fields(VideoArgs):
-    flag = "--" + field.name.replace("_", "-")
-    parser.add_argument(flag, type=type(field.default), default=field.default,
-                        help=f"default: {field.default!r}")
-  return VideoArgs(**vars(parser.parse_args(argv)))
-
-
 def population(species):
   """Who is in the picture, e.g. ('crosser', 'crosser', 'pusher') ->
   '2 crossers and 1 pusher'; one species of 'ant' -> '4 agents'."""
@@ -132,8 +129,11 @@ def population(species):
 
 
 def main(argv=None):
-  args = parse_args(argv)
-  frames = record(args)
+  args = cli.parse(VideoArgs, argv, description=__doc__.splitlines()[0])
+  try:
+    frames = record(args)
+  except cli.user_errors() as e:
+    cli.fail("coop-video", e)
   for path in (args.out, args.png):
     if path:
       print(f"wrote {path} ({os.path.getsize(path) / 1e3:.0f} kB)")

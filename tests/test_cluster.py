@@ -102,7 +102,7 @@ def test_training_spreads_actors_over_two_nodes(cluster, tmp_path):
     del iteration, row
     actor_nodes.append([_node_of(pid, raylets) for pid in pool.pids()])
 
-  args = config_lib.TrainArgs(**{
+  args = config_lib.train_args(**{
       **test_train.TINY, 'task': 'transport', 'actors': 2,
       'logdir': str(tmp_path / 'run'), 'ray_address': nodes.address,
       'total_steps': 4 * test_train.STEPS})  # 2 iterations of 2 actors.

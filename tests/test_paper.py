@@ -29,7 +29,7 @@ BASELINES = os.path.join(os.path.dirname(__file__), '..', 'results',
 def tiny_run(tmp_path_factory, controller):  # pylint: disable=redefined-outer-name
   """One iteration of 2 (the cells' budget) of TINY's hrl on transport."""
   logdir = str(tmp_path_factory.mktemp('paper') / 'hrl')
-  learner_loop.train(config_lib.TrainArgs(
+  learner_loop.train(config_lib.train_args(
       **{**TINY, 'task': 'transport', 'logdir': logdir,
          'controller': controller, 'total_steps': STEPS}))
   return logdir
@@ -202,7 +202,7 @@ def test_report_rebuilds_the_tables_from_committed_results(tmp_path, capsys):
           '12.8% +- 5.6 | 12% +- 3 | 12% +- 3 |') in text
   assert '| corridor (4 Ants) | HRL | not run |  | 0/5 |' in text
   assert '| 4 | 37.5% +- 18.3 | +- 12.5 | 2/3 |' in text  # Fig. 4a.
-  assert 'coop-train --actors 0 --total-steps 15000000 --seed 1 --logdir' in text
+  assert 'coop-train --seed 1 --actors 0 --total-steps 15000000 --logdir' in text
   assert '# transport/hrl/n4/s1 (done)' in text
   # Into a marked block of a markdown file, again and again.
   docs = tmp_path / 'results.md'

@@ -65,13 +65,13 @@ def _args(logdir, controller, **overrides):
             'controller': controller, 'total_steps': 2 * STEPS, **overrides}
   if values['task'] == 'ravine':
     values.update(n_agents=1, n_pushers=1)
-  return config_lib.TrainArgs(**values)
+  return config_lib.train_args(**values)
 
 
 def _argv(controller, total_steps):  # pylint: disable=redefined-outer-name
   """The flags of `_args` for the CLI (without --task and --logdir)."""
-  args = config_lib.TrainArgs(**TINY, controller=controller,
-                              total_steps=total_steps)
+  args = config_lib.train_args(**TINY, controller=controller,
+                               total_steps=total_steps)
   return cli.command_line(args, 'coop-train',
                           skip=('task', 'logdir')).split()[1:]
 
@@ -282,7 +282,7 @@ def ravine_stages(tmp_path_factory, controller):
 
 
 def _joint_learners(args):
-  config = config_lib.hierarchy_config(args)
+  config = args.hierarchy
   layout = learner_loop.probe(learner_loop.environment_spec(args), config)[0]
   return learner_loop.make_learners(config, layout)
 

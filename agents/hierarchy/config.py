@@ -10,7 +10,7 @@ species.
 """
 import dataclasses
 
-from agents.ppo import config as ppo_config
+from agents import fields
 
 AGENTS = ('hrl', 'no_memory', 'flat', 'mappo')
 CRITICS = ('separate', 'stop_gradient', 'shared')
@@ -20,12 +20,12 @@ CRITICS = ('separate', 'stop_gradient', 'shared')
 class HierarchyConfig:
   """Everything that decides the agent's networks and how they learn."""
 
-  agent: str = 'hrl'
+  agent: str = fields.field('hrl', fields.one_of(*AGENTS))
   """Variant (paper section 6 ablations): 'hrl' = UL MLP + ML GRU (default);
   'no_memory' = an MLP in place of the GRU (Nachum et al. 2019); 'flat' = one
   MLP from proprio + extero to the joint actions, no lower layer; 'mappo' =
   'hrl' whose critic also reads the global state (centralised critic)."""
-  critic: str = 'separate'
+  critic: str = fields.field('separate', fields.one_of(*CRITICS))
   """How the critic relates to the policy's upper and middle layers, the same
   for 'hrl', 'no_memory' and 'mappo' ('flat' always has its own value MLP):
   'separate' = an upper and middle layer of its own (the value loss cannot
@@ -35,47 +35,47 @@ class HierarchyConfig:
   transport run, which collapsed; kept to reproduce it)."""
 
   # Optimisation.
-  learning_rate: float = 5e-4
+  learning_rate: float = fields.field(5e-4, fields.POSITIVE)
   """Adam step size at the start (paper); then adapted, see `target_kl`."""
-  target_kl: float = 0.008
+  target_kl: float = fields.field(0.008, fields.NON_NEGATIVE)
   """KL-adaptive learning rate (the paper's rl_games, `agents.ppo.step_size`):
   after each minibatch the rate is divided by 1.5 if its approximate KL to
   the behaviour policy is above 2 x target_kl and multiplied by 1.5 below
   target_kl / 2. 0 keeps `learning_rate` constant."""
-  adam_epsilon: float = 1e-5
+  adam_epsilon: float = fields.field(1e-5, fields.POSITIVE)
   """Adam's denominator epsilon (CleanRL / PureJaxRL)."""
-  max_grad_norm: float = 1.0
+  max_grad_norm: float = fields.field(1.0, fields.POSITIVE)
   """Gradients are rescaled to at most this global L2 norm. With normalised
   advantages and values both losses are O(1) and so are their gradients; 1.0
   (rl_games' Ant setting) clips outliers, not every step."""
-  num_epochs: int = 4
+  num_epochs: int = fields.field(4, fields.COUNT)
   """Passes over each batch of sequences."""
-  num_minibatches: int = 4
+  num_minibatches: int = fields.field(4, fields.COUNT)
   """Minibatches per epoch, split along the batch axis B (sequences stay
   whole), which must divide by it."""
 
   # PPO objective.
-  discount: float = 0.99
+  discount: float = fields.field(0.99, fields.UNIT)
   """Per-command discount gamma; multiplied by the 0/1 env discount. The
   paper's 0.995 is per simulator step; per 0.5 s command it would be a
   horizon 1 / (1 - gamma) of 200 commands = 100 s, beyond a 40 s episode.
   0.99 is 100 commands = 50 s: a success at an episode's end is still worth
   0.99^80 = 0.45 of itself at its start, and returns stay ~2x shorter."""
-  gae_lambda: float = 0.95
+  gae_lambda: float = fields.field(0.95, fields.UNIT)
   """GAE lambda: 0 is one-step TD, 1 is Monte-Carlo returns."""
-  clip_epsilon: float = 0.2
+  clip_epsilon: float = fields.field(0.2, fields.POSITIVE)
   """PPO trust region: ratios clipped to [1 - eps, 1 + eps] (paper)."""
   clip_value_loss: bool = False
   """Also clip value updates to +-clip_epsilon (CleanRL's option)."""
-  entropy_cost: float = 1e-2
+  entropy_cost: float = fields.field(1e-2, fields.NON_NEGATIVE)
   """Weight of the entropy bonus (Brax's and the lower layer's). 1e-3 was
   30-60x weaker than the policy loss and the std fell 0.69 -> 0.03 in the
   first transport run; with 1e-2 and `min_action_std` exploration stays."""
-  min_action_std: float = 0.1
+  min_action_std: float = fields.field(0.1, fields.NON_NEGATIVE)
   """Floor of the command's std in pre-tanh units (softplus(s) + floor):
   the policy's sensitivity to a parameter step grows as 1 / std, so a
   collapsing std made every update larger. Evaluation acts with the mean."""
-  value_cost: float = 0.5
+  value_cost: float = fields.field(0.5, fields.NON_NEGATIVE)
   """Weight of the value loss 0.5 * (target - value)^2, in normalised units
   when `normalize_values`."""
   normalize_values: bool = True
@@ -84,14 +84,14 @@ class HierarchyConfig:
   learner state."""
   normalize_advantages: bool = True
   """Standardise advantages within each minibatch."""
-  reward_scaling: float = 0.01
+  reward_scaling: float = fields.field(0.01, fields.POSITIVE)
   """Rewards are multiplied by this before GAE. The paper's rewards summed
   over a 0.5 s command reach ~40 per command and ~3000 per episode; unscaled,
   the value loss (~3e4) dominates the clipped global gradient norm and the
   policy barely moves (measured: approx_kl ~1e-4 per update)."""
 
   # Data.
-  sequence_length: int = 32
+  sequence_length: int = fields.field(32, fields.COUNT)
   """T, commands per training sequence (truncated BPTT length): the actor
   hands over a `SequenceBatch` every T commands, its GRU state stored at the
   start of the sequence. 32 commands = 16 s at a 0.5 s command period; with
@@ -99,26 +99,27 @@ class HierarchyConfig:
   normalize_observations: bool = True
   """Standardise observations and the global state with running statistics
   (`agents.normalization`), updated by the learner before each update."""
-  observation_clip: float = 5.0
+  observation_clip: float = fields.field(5.0, fields.POSITIVE)
   """Normalised inputs are clipped to [-clip, clip]."""
-  seed: int = 0
+  seed: int = fields.field(0, fields.SEED)
   """Seed of parameter initialisation, minibatch shuffling and action noise
-  (the builder folds in the species and actor ids)."""
+  (the builder folds in the species and actor ids); `coop-train` seeds the
+  environments with it too."""
 
   # Networks.
-  upper_layer_sizes: tuple[int, ...] = (128, 128)
+  upper_layer_sizes: tuple[int, ...] = fields.field((128, 128), fields.COUNT)
   """UL: hidden widths of the MLP over the exteroceptive features."""
-  middle_layer_size: int = 128
+  middle_layer_size: int = fields.field(128, fields.COUNT)
   """ML: GRU hidden size h ('hrl', 'mappo'), or the width of the MLP layer
   replacing it ('no_memory'). Also the carry width of every variant, so that
   actor and learner handle one carry shape."""
-  head_sizes: tuple[int, ...] = (128,)
+  head_sizes: tuple[int, ...] = fields.field((128,), fields.COUNT)
   """Hidden widths of the command head and the value head on top of the ML
   (the critic's own ML with `critic='separate'`)."""
-  critic_sizes: tuple[int, ...] = (128, 128)
+  critic_sizes: tuple[int, ...] = fields.field((128, 128), fields.COUNT)
   """'mappo': widths of the MLP over the global state whose features join
   the critic's middle-layer features before the value head."""
-  flat_sizes: tuple[int, ...] = (256, 256)
+  flat_sizes: tuple[int, ...] = fields.field((256, 256), fields.COUNT)
   """'flat': hidden widths of its policy MLP and its separate value MLP (the
   lower layer's own architecture, `agents.ppo` defaults)."""
   activation: str = 'swish'
@@ -161,16 +162,8 @@ class HierarchyConfig:
     return self.middle_layer_size * (2 if separate_critic else 1)
 
   def __post_init__(self):
-    if self.agent not in AGENTS:
-      raise ValueError(f'HierarchyConfig.agent must be one of {AGENTS}, got '
-                       f'{self.agent!r}.')
-    if self.critic not in CRITICS:
-      raise ValueError(f'HierarchyConfig.critic must be one of {CRITICS}, '
-                       f'got {self.critic!r}.')
-    ppo_config.validate(
-        self, positive=('sequence_length', 'middle_layer_size'),
-        non_negative=('min_action_std',))
     # Lists from a CLI or JSON become tuples, keeping the config hashable.
     for name in ('upper_layer_sizes', 'head_sizes', 'critic_sizes',
                  'flat_sizes'):
       object.__setattr__(self, name, tuple(getattr(self, name)))
+    fields.check(self)

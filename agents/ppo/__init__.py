@@ -4,7 +4,7 @@ One learner for every policy: the lower layer's feed-forward one (this
 package's actor and builder) and the hierarchy's (`agents.hierarchy`), a
 feed-forward network being a recurrent one without memory.
 
-config.py    PPOConfig (the lower layer's), and the checks every config shares.
+config.py    PPOConfig, the lower layer's hyper-parameters.
 types.py     SequenceBatch (what actors send) and the loss's training batches.
 losses.py    compute_gae and ppo_loss, pure functions over [T, B] arrays.
 returns.py   compute_targets: truncation, GAE and value normalisation.

@@ -1,0 +1,172 @@
+"""Every CLI comes from its dataclass through tyro: nested configs as flat
+flags, command lines that parse back to the same arguments, range errors
+as one line, resume checks from field metadata, old flat configs."""
+import dataclasses
+import json
+import os
+import shutil
+
+import pytest
+
+from agents import fields
+from agents.hierarchy import config as hierarchy_config
+from runners import baselines
+from runners import cli
+from runners import config as config_lib
+from runners import eval_lowlevel
+from runners import evaluate
+from runners import learner_loop
+from runners import paper
+from runners import pretrain_locomotion
+from runners import train
+from runners import video
+
+_ROOT = os.path.join(os.path.dirname(__file__), '..')
+# A run stored before the agent's config was nested (flat TrainArgs); the
+# paper's next session resumes it.
+_OLD_RUN = os.path.join(_ROOT, 'results', 'paper_partial',
+                        'transport_hrl_n4_s0')
+_OLD_STATE = os.path.join(_OLD_RUN, 'checkpoints', 'ckpt_00000659',
+                          'state.json')
+_CLIS = (config_lib.TrainArgs, evaluate.EvalArgs, video.VideoArgs,
+         pretrain_locomotion.Args, eval_lowlevel.EvalArgs,
+         baselines.BaselineArgs, paper.PaperArgs)
+
+
+def _leaf_names(cls):
+  for field in dataclasses.fields(cls):
+    if dataclasses.is_dataclass(field.type):
+      yield from _leaf_names(field.type)
+    else:
+      yield field.name
+
+
+def _old_state():
+  with open(_OLD_STATE) as f:
+    return json.load(f)
+
+
+@pytest.mark.parametrize('argv', [
+    '--task transport --n-agents 4 --agent mappo --actors 2 '
+    '--init-from pusher=PATH --stage joint',
+    '--task ravine --stage joint --init-from pusher=RUN_A crosser=RUN_B',
+    '--task corridor --agent no_memory --actors 8 --envs-per-actor 16',
+    '--actors 0 --total-steps 307200 --critic stop_gradient --seed 3 '
+    '--learning-rate 0.001 --upper-layer-sizes 16 16 --no-normalize-values '
+    '--no-keep-best --target-kl 0 --time-limit 20',
+])
+def test_documented_flags_parse_and_print_back(argv):
+  args = cli.parse(config_lib.TrainArgs, argv.split())
+  line = cli.command_line(args, 'coop-train')
+  assert cli.parse(config_lib.TrainArgs, line.split()[1:]) == args
+  flat = config_lib.flat_dict(args.to_dict())  # As JSON, lists.
+  assert config_lib.train_args(**flat) == args
+
+
+def test_the_agent_config_is_nested_not_copied():
+  args = cli.parse(config_lib.TrainArgs,
+                   ['--agent', 'flat', '--seed', '7', '--flat-sizes', '32',
+                    '--adam-epsilon', '1e-6'])
+  assert args.hierarchy == hierarchy_config.HierarchyConfig(
+      agent='flat', seed=7, flat_sizes=(32,), adam_epsilon=1e-6)
+  assert (args.agent, args.seed) == ('flat', 7)
+  assert args.logdir == 'runs/transport_flat_n4_s7'
+  own = {f.name for f in dataclasses.fields(config_lib.TrainArgs)}
+  agent = {f.name for f in dataclasses.fields(hierarchy_config.HierarchyConfig)}
+  assert not own & agent  # Flags without a prefix must be unique.
+
+
+@pytest.mark.parametrize('cls', _CLIS, ids=lambda c: c.__module__)
+def test_help_shows_every_flag_with_its_docstring(cls, capsys):
+  with pytest.raises(SystemExit) as exit_info:
+    cli.parse(cls, ['--help'])
+  assert exit_info.value.code == 0
+  text = ' '.join(capsys.readouterr().out.split())
+  for name in _leaf_names(cls):
+    assert fields.flag(name) in text, name
+  if cls is config_lib.TrainArgs:
+    assert '--learning-rate FLOAT' in text and 'Adam step size' in text
+    assert '--keep-best, --no-keep-best' in text
+
+
+@pytest.mark.parametrize('main,argv,message', [
+    (train.main, ['--learning-rate', '-1'],
+     '--learning-rate must be > 0, got -1.0.'),
+    (train.main, ['--agent', 'feudal'], "--agent must be one of ('hrl', "),
+    (train.main, ['--discount', '1.5'], '--discount must be in [0, 1]'),
+    (train.main, ['--actors', '-1'], '--actors must be >= 0'),
+    (train.main, ['--time-limit', 'inf'],
+     "--time-limit must be 0 (the task's default), or > 0, got inf."),
+    (video.main, ['--fps', '0', '--png', 'x.png'], '--fps must be >= 1'),
+    (video.main, ['--policy', 'best', '--png', 'x.png'], '--policy'),
+    (evaluate.main, ['--checkpoint', 'x', '--n-agents', '-2'],
+     '--n-agents must be 0 (the training one), or >= 1, got -2.'),
+    (pretrain_locomotion.main, ['--discount', '2'], '--discount'),
+    (eval_lowlevel.main, ['--episodes', '0'], '--episodes'),
+])
+def test_a_value_out_of_range_is_one_line_naming_the_flag(main, argv,
+                                                          message, capsys):
+  with pytest.raises(SystemExit) as exit_info:
+    main(argv)
+  assert exit_info.value.code == 2
+  err = capsys.readouterr().err.strip()
+  assert len(err.splitlines()) == 1 and ': error: ' in err, err
+  assert message in err
+
+
+def test_range_checker():
+  assert 0.5 in fields.UNIT and 1.5 not in fields.UNIT
+  assert float('nan') not in fields.POSITIVE
+  assert float('inf') not in fields.POSITIVE
+  assert 2**32 not in fields.SEED and 2**32 - 1 in fields.SEED
+  assert -1 in fields.equal(-1, 'no limit') | fields.NON_NEGATIVE
+  with pytest.raises(ValueError, match=r'--critic-sizes must be >= 1, got '
+                     r'\[8, 0\]'):
+    hierarchy_config.HierarchyConfig(critic_sizes=(8, 0))
+
+
+def test_resumable_fields_are_marked_in_their_metadata():
+  marked = {f.name for f in dataclasses.fields(config_lib.TrainArgs)
+            if f.metadata.get('resumable')}
+  assert marked == {
+      'actors', 'envs_per_actor', 'total_steps', 'logdir', 'ray_address',
+      'resume', 'resume_from', 'checkpoint_every', 'keep_checkpoints',
+      'keep_best', 'max_actor_restarts', 'progress', 'controller', 'window',
+      'init_from'}
+  saved = config_lib.train_args(task='corridor', seed=2).to_dict()
+  config_lib.check_resumable(saved, config_lib.train_args(
+      task='corridor', seed=2, actors=8, total_steps=5, window=10))
+  for change, flag in ((dict(n_agents=3), '--n-agents'),
+                       (dict(learning_rate=1e-3), '--learning-rate'),
+                       (dict(agent='mappo'), '--agent')):
+    with pytest.raises(ValueError, match=f'{flag} \\(run: '):
+      config_lib.check_resumable(saved, config_lib.train_args(
+          task='corridor', seed=2, logdir='runs/corridor_hrl_n4_s2',
+          **change))
+
+
+def test_an_old_flat_config_loads_resumes_and_evaluates(tmp_path):
+  state = _old_state()
+  assert 'hierarchy' not in state['args']  # The flat form.
+  args = config_lib.TrainArgs.from_dict(state['args'])
+  assert args.hierarchy == hierarchy_config.HierarchyConfig(
+      **state['agent_config'])
+  assert (args.task, args.agent, args.seed, args.total_steps) == (
+      'transport', 'hrl', 0, 15_000_000)
+  assert config_lib.TrainArgs.from_dict(args.to_dict()) == args
+  assert config_lib.TrainArgs.from_dict(json.loads(json.dumps(
+      args.to_dict()))) == args
+  # Resuming it: the same settings pass, another agent setting is named.
+  run = str(tmp_path / 'run')
+  shutil.copytree(_OLD_RUN, run)
+  resumed = dataclasses.replace(args, logdir=run, resume=True, actors=1)
+  assert learner_loop.check_run_directory(resumed).startswith(run)
+  with pytest.raises(ValueError, match='--entropy-cost'):
+    learner_loop.check_run_directory(dataclasses.replace(
+        resumed, hierarchy=dataclasses.replace(args.hierarchy,
+                                               entropy_cost=0.1)))
+  # Evaluating it: its networks restore from the old state.
+  spec, config, models, _ = evaluate.load_model(
+      run, evaluate.EvalArgs(checkpoint=(run,), n_agents=2))
+  assert spec.n_agents == 2 and config == args.hierarchy
+  assert set(models) == {'ant'}
