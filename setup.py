@@ -32,6 +32,9 @@ setuptools.setup(
         "jax",
         "flax",
         "optax",
+        # Checkpoints (runners/checkpoints.py): CheckpointManager with
+        # preservation policies (LatestN + BestN); 0.12.8 is the one tested.
+        "orbax-checkpoint>=0.12.8",
         "ray[default]>=2.9",
         "imageio",
         "imageio-ffmpeg",

@@ -2,7 +2,7 @@
 
 Layout, one concept per module:
   core.py           Actor / Learner / VariableSource interfaces.
-  checkpointing.py  atomic learner checkpoint files (kind, format, state).
+  checkpointing.py  a learner's saved state (kind, format, state dict).
   fields.py         config fields with their allowed values; the one check.
   normalization.py  running statistics (observations, global state, values).
   observations.py   observation dicts -> the flat vectors the networks read.

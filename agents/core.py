@@ -5,10 +5,9 @@ way: actors step environments and pull parameters from a `VariableSource`
 (usually the learner, possibly behind a Ray handle); learners consume data in
 `step()` and publish parameters through `get_variables()`.
 
-Deviation from Acme: Acme's `Saveable.save()` returns an in-memory state and a
-separate TensorFlow Checkpointer writes it. We have no Checkpointer, so
-`save(path)` / `restore(path)` take a file path and the learner writes the file
-itself (atomically, see `agents.checkpointing`).
+As in Acme's `Saveable`, `save()` returns an in-memory state and a separate
+checkpointer writes it (`runners.checkpoints`, through orbax, in place of
+Acme's TensorFlow Checkpointer); `restore(state)` continues from it.
 """
 import abc
 from typing import Any, Sequence
@@ -66,11 +65,11 @@ class Learner(VariableSource):
   def step(self) -> Any:
     """Performs one learning update (for PPO: one batch, all epochs)."""
 
-  def save(self, path: str) -> None:
-    """Writes everything needed to resume training to `path`."""
+  def save(self) -> Any:
+    """Everything needed to resume training, as host data (no files)."""
     raise NotImplementedError(f'{type(self).__name__} does not implement save.')
 
-  def restore(self, path: str) -> None:
-    """Resumes from a file written by `save`."""
+  def restore(self, saved: Any) -> None:
+    """Resumes from what `save` returned."""
     raise NotImplementedError(
         f'{type(self).__name__} does not implement restore.')

@@ -1,126 +1,186 @@
-"""Checkpoints of a cooperative run: every species' learner plus counters.
+"""Checkpoints of a run, through orbax: every species' learner plus counters.
 
-One checkpoint is one directory, `<logdir>/checkpoints/ckpt_<iteration>/`:
+One checkpoint is one orbax step, `<logdir>/checkpoints/<iteration>/`:
 
-  <species>.msgpack   that species' full learner state (`learner.save`:
-                      params, optimiser, normalisers, update step, PRNG key)
-  state.json          counters (iteration, env_steps, episodes, wall_time,
-                      restarts), the run's `TrainArgs`, the agent's
-                      `HierarchyConfig` and the species layout
+  learners/   {species name: that species' saved learner state} (a PyTree
+              item: params, optimiser, normalisers, update counter, PRNG
+              key; `Learner.save()`)
+  state/      a JSON item: counters (iteration, env_steps, episodes,
+              wall_time, restarts), the run's `TrainArgs`, the agent's
+              `HierarchyConfig`, the species layout, the episode window and
+              each learner's kind and format
+  metrics/    on the iterations saved as a new best: the episode window's
+              success and return
 
-It is written into a temporary sibling directory and renamed into place
-(`run_dir.replace_directory`), so a kill at any instant leaves either the
-whole checkpoint or none, and a checkpoint written again (`best/`, or the
-same iteration after a resume) is never lost in between; the newest `keep`
-are kept. `--resume` and `coop-eval` read the newest checkpoint that reads
-completely (`resolve`): one damaged by something else (a full disk, a
-copy cut short) is named and passed over for the one before it.
+One `orbax.checkpoint.CheckpointManager` writes them (`save`),
+synchronously: orbax writes a step under a temporary name and renames it
+into place when complete, so a kill at any instant leaves the whole
+checkpoint or none, and a temporary one is never read (the next writer
+removes it). It keeps the newest `keep` and, with `--keep-best`, the best
+one by its window's (success, return). `--resume` and `coop-eval` read the
+newest checkpoint that reads completely (`resolve`): one damaged by
+something else (a full disk, a copy cut short) is named and passed over for
+the one before it. `coop-eval --checkpoint <logdir>/checkpoints/best` reads
+the best one.
 
-`<logdir>/checkpoints/best/` (with `--keep-best`) is a checkpoint of the same
-form holding the iteration whose episode window scored best (`save_best`);
-`coop-eval --checkpoint <logdir>/checkpoints/best` evaluates it.
+Runs from before orbax (`checkpoints/ckpt_<iteration>/` and `checkpoints/
+best/`, each with a `<species>.msgpack` per learner and `state.json`) read as
+before and resume; the resumed run writes orbax steps beside them, and the
+old checkpoints go as the newest `keep` (and a new best) replace them.
 """
 import glob
-import json
 import os
 import shutil
 import sys
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Mapping, Optional
+
+import numpy as np
 
 from runners import run_dir
 
-FORMAT = 1
-STATE_FILE = 'state.json'
+FORMAT = 2
+"""The layout of the state item (1: the `state.json` of runs before orbax)."""
 BEST = 'best'
-_PREFIX = 'ckpt_'
+STATE_FILE = 'state.json'  # Runs before orbax.
+_LEGACY_PREFIX = 'ckpt_'
+_ITEMS = ('learners', 'state')
 
 
 class CorruptCheckpoint(ValueError):
-  """A checkpoint file that cannot be read completely; names the file."""
+  """A checkpoint that cannot be read completely; names it."""
 
 
 def _directory(logdir: str) -> str:
   return os.path.join(logdir, 'checkpoints')
 
 
-def list_checkpoints(logdir: str) -> list[str]:
-  """Checkpoint directories of a run (complete when written), oldest first."""
-  paths = glob.glob(os.path.join(_directory(logdir), _PREFIX + '*'))
-  return sorted(p for p in paths if os.path.basename(p)[len(_PREFIX):]
-                .isdigit() and os.path.exists(os.path.join(p, STATE_FILE)))
+def _score(metrics: Mapping[str, float]) -> tuple[float, float]:
+  return metrics['success'], metrics['return']
 
 
-def _write(final: str, learners: Mapping[str, Any], state: dict[str, Any]):
-  """Writes a checkpoint directory `final` atomically (temporary sibling,
-  then rename), replacing any earlier one of that name."""
-  tmp = f'{final}.tmp-{os.getpid()}'
-  run_dir.remove_stale(os.path.dirname(final))
-  shutil.rmtree(tmp, ignore_errors=True)  # Ours, from a failed write.
-  os.makedirs(tmp)
-  for name, learner in learners.items():
-    learner.save(os.path.join(tmp, f'{name}.msgpack'))
-  with open(os.path.join(tmp, STATE_FILE), 'w') as f:
-    json.dump({'format': FORMAT, **state}, f, indent=1)
-    f.flush()
-    os.fsync(f.fileno())
-  run_dir.replace_directory(tmp, final)
+def _manager(directory: str, keep: Optional[int] = None):
+  """The run's CheckpointManager over `directory`: a writer keeping the
+  newest `keep` and the best one, or a reader when `keep` is None."""
+  import orbax.checkpoint as ocp  # pylint: disable=g-import-not-at-top
+  policies = ocp.checkpoint_managers
+  return ocp.CheckpointManager(
+      os.path.abspath(directory), options=ocp.CheckpointManagerOptions(
+          read_only=keep is None, create=keep is not None,
+          enable_async_checkpointing=False,
+          cleanup_tmp_directories=keep is not None,
+          best_fn=_score, best_mode='max',
+          preservation_policy=None if keep is None else
+          policies.AnyPreservationPolicy([
+              policies.LatestN(keep),
+              policies.BestN(get_metric_fn=_score, n=1,
+                             keep_checkpoints_without_metrics=False)])))
 
 
 def save(logdir: str, learners: Mapping[str, Any], state: dict[str, Any],
-         keep: int) -> str:
+         keep: int, score: Optional[tuple[float, float]] = None) -> str:
   """Writes a checkpoint atomically; returns its directory.
 
   Args:
-    logdir: the run directory.
-    learners: {species name: HierarchyLearner}.
+    logdir: the run directory (its one writer calls this).
+    learners: {species name: learner} (`save()` gives its state).
     state: JSON-able dict with at least 'iteration' (counters, config...).
-    keep: newest checkpoints kept; older ones are deleted.
+    keep: newest checkpoints kept; older ones are deleted unless best.
+    score: (success, return) of the episode window when this iteration is
+      a new best (kept as the best until one scores higher), else None.
   """
-  final = os.path.join(_directory(logdir),
-                       f'{_PREFIX}{int(state["iteration"]):08d}')
-  _write(final, learners, state)
-  for old in list_checkpoints(logdir)[:-keep]:
-    shutil.rmtree(old, ignore_errors=True)
-  return final
+  import jax  # pylint: disable=g-import-not-at-top
+  import orbax.checkpoint as ocp  # pylint: disable=g-import-not-at-top
+  saved = {name: learner.save() for name, learner in learners.items()}
+  # Orbax stores no zero-size arrays; `checkpointing.from_state_dict` puts
+  # them back from the learner's own state.
+  arrays = {name: jax.tree.map(lambda a: None if np.size(a) == 0 else a,
+                               s['state']) for name, s in saved.items()}
+  state = {**state, 'format': FORMAT, 'learners': {
+      name: {'kind': s['kind'], 'format': s['format']}
+      for name, s in saved.items()}}
+  metrics = None
+  if score is not None:
+    metrics = {'success': score[0], 'return': score[1]}
+  iteration = int(state['iteration'])
+  with _manager(_directory(logdir), keep) as manager:
+    manager.save(iteration, metrics=metrics, force=True,
+                 args=ocp.args.Composite(learners=ocp.args.PyTreeSave(arrays),
+                                         state=ocp.args.JsonSave(state)))
+  _remove_legacy(logdir, keep, best=score is not None)
+  return os.path.join(_directory(logdir), str(iteration))
 
 
-def save_best(logdir: str, learners: Mapping[str, Any],
-              state: dict[str, Any]) -> str:
-  """Writes `state` and the learners as `checkpoints/best/`, atomically,
-  replacing the previous best; returns its directory."""
-  final = os.path.join(_directory(logdir), BEST)
-  _write(final, learners, state)
-  return final
+def discard_after(logdir: str, iteration: int) -> None:
+  """Deletes the checkpoints after `iteration` (a resumed run redoes them)."""
+  for checkpoint in list_checkpoints(logdir):
+    if _iteration(checkpoint) > iteration:
+      shutil.rmtree(checkpoint)
+
+
+def list_checkpoints(logdir: str) -> list[str]:
+  """Checkpoint directories of a run (orbax steps and those from before
+  orbax), oldest first; orbax's temporary ones are left out."""
+  found = _legacy_checkpoints(logdir)
+  if os.path.isdir(_directory(logdir)):
+    with _manager(_directory(logdir)) as manager:
+      found += [os.path.join(_directory(logdir), str(step))
+                for step in manager.all_steps()]
+  return sorted(found, key=lambda path: (_iteration(path), _is_step(path)))
+
+
+def _iteration(checkpoint: str) -> int:
+  return int(os.path.basename(checkpoint).removeprefix(_LEGACY_PREFIX))
+
+
+def _is_step(path: str) -> bool:
+  """Whether `path` is an orbax step (else a checkpoint from before)."""
+  return os.path.isdir(os.path.join(path, 'state'))
 
 
 def _report(message: str) -> None:
   print(message, file=sys.stderr, flush=True)
 
 
+def _best(directory: str) -> Optional[str]:
+  """The best orbax step in a run's checkpoint directory, if any."""
+  if not os.path.isdir(directory):
+    return None
+  with _manager(directory) as manager:
+    step = manager.best_step() if manager.all_steps() else None
+    # Without metrics, orbax answers the latest step: no best.
+    if step is None or manager.metrics(step) is None:
+      return None
+  return os.path.join(directory, str(step))
+
+
 def resolve(path: str, report: Callable[[str], None] = _report) -> str:
-  """The checkpoint directory to read: `path` itself if it is one, else the
-  newest checkpoint of the run directory `path` that reads completely.
+  """The checkpoint directory to read: `path` itself if it is one (for
+  `<logdir>/checkpoints/best`, the best one), else the newest checkpoint
+  of the run directory `path` that reads completely.
 
   Checkpoints that do not read completely are passed over, and `report`
-  is told which (with the file and the error) and which one is used
-  instead. A checkpoint directory given as `path` must read completely.
+  is told which (with the error) and which one is used instead. A
+  checkpoint given as `path` must read completely.
 
   Raises:
     FileNotFoundError: `path` holds no checkpoint.
     CorruptCheckpoint: `path` is a damaged checkpoint, or every checkpoint
       of the run is.
   """
-  # A writer killed while replacing `best/` leaves it aside: put it back.
-  run_dir.recover_directory(os.path.normpath(path))
+  path = os.path.normpath(path)
+  # A writer from before orbax killed while replacing `best/` left it aside.
+  run_dir.recover_directory(path)
   run_dir.recover_directory(os.path.join(_directory(path), BEST))
-  if os.path.exists(os.path.join(path, STATE_FILE)):
+  if os.path.basename(path) == BEST:
+    path = _best(os.path.dirname(path)) or path
+  if _is_step(path) or os.path.exists(os.path.join(path, STATE_FILE)):
     check_complete(path)
     return path
   found = list_checkpoints(path)
   if not found:
     raise FileNotFoundError(f'No checkpoint in {path!r}: expected a run '
-                            f'directory with checkpoints/{_PREFIX}*/ or a '
-                            f'checkpoint directory holding {STATE_FILE}.')
+                            'directory with checkpoints/<iteration>/ or a '
+                            'checkpoint directory.')
   damaged = []
   for checkpoint in reversed(found):
     try:
@@ -136,13 +196,120 @@ def resolve(path: str, report: Callable[[str], None] = _report) -> str:
                           + ' '.join(damaged))
 
 
-def read_state(checkpoint: str) -> dict[str, Any]:
-  """The state.json of a checkpoint directory.
+def _read(checkpoint: str, items=_ITEMS) -> dict[str, Any]:
+  """{item: contents} of an orbax step, read through.
 
   Raises:
-    CorruptCheckpoint: the file is missing, empty or not JSON.
+    CorruptCheckpoint: it cannot be read, or holds no state.
     ValueError: another checkpoint format.
   """
+  import orbax.checkpoint as ocp  # pylint: disable=g-import-not-at-top
+  restore = {'learners': ocp.args.PyTreeRestore,
+             'state': ocp.args.JsonRestore}
+  try:
+    with ocp.Checkpointer(ocp.CompositeCheckpointHandler()) as checkpointer:
+      read = checkpointer.restore(os.path.abspath(checkpoint),
+                                  args=ocp.args.Composite(**{
+                                      item: restore[item]() for item in items
+                                  }))
+  except Exception as e:  # pylint: disable=broad-except
+    # Orbax and TensorStore raise ValueError, KeyError, OSError, JSON errors.
+    raise CorruptCheckpoint(f'{checkpoint} cannot be read ({e}).') from None
+  state = read['state']
+  if not isinstance(state, dict):
+    raise CorruptCheckpoint(f'{checkpoint} holds no checkpoint state.')
+  if state.get('format') != FORMAT:
+    raise ValueError(f'{checkpoint} has checkpoint format '
+                     f'{state.get("format")}, expected {FORMAT}.')
+  missing = [n for n in state.get('learners', {})
+             if 'learners' in items and n not in read['learners']]
+  if missing:
+    raise CorruptCheckpoint(f'{checkpoint} holds no learner for {missing}.')
+  return {item: read[item] for item in items}
+
+
+def read_state(checkpoint: str) -> dict[str, Any]:
+  """The state (counters, config, species) of a checkpoint directory.
+
+  Raises:
+    CorruptCheckpoint: it cannot be read.
+    ValueError: another checkpoint format.
+  """
+  if not _is_step(checkpoint):
+    return _read_legacy_state(checkpoint)
+  return _read(checkpoint, ('state',))['state']
+
+
+def check_complete(checkpoint: str) -> dict[str, Any]:
+  """Reads `checkpoint` through (the state and every species' learner)
+  without building learners; returns the state.
+
+  Raises:
+    CorruptCheckpoint: naming what does not read completely.
+  """
+  if not _is_step(checkpoint):
+    return _check_legacy(checkpoint)
+  return _read(checkpoint)['state']
+
+
+def saved_learner(checkpoint: str, species: str) -> dict[str, Any]:
+  """One species' saved learner state (for `Learner.restore` or
+  `initialize_from`)."""
+  if not _is_step(checkpoint):
+    from agents import checkpointing  # pylint: disable=g-import-not-at-top
+    path = os.path.join(checkpoint, f'{species}.msgpack')
+    if not os.path.exists(path):
+      raise ValueError(f'{checkpoint} holds no learner for species '
+                       f'{species!r}.')
+    return checkpointing.read_file(path)
+  read = _read(checkpoint)
+  if species not in read['learners']:
+    raise ValueError(f'{checkpoint} holds no learner for species '
+                     f'{species!r}.')
+  return {**read['state']['learners'][species],
+          'state': read['learners'][species]}
+
+
+def restore(checkpoint: str, learners: Mapping[str, Any]) -> dict[str, Any]:
+  """Restores every species' learner; returns the state dict."""
+  state = read_state(checkpoint)
+  for name, learner in learners.items():
+    learner.restore(saved_learner(checkpoint, name),
+                    source=f'{checkpoint} ({name})')
+  return state
+
+
+def run_directory(checkpoint: str) -> str:
+  """The run directory a checkpoint directory belongs to."""
+  return os.path.dirname(os.path.dirname(os.path.abspath(checkpoint)))
+
+
+# --- Checkpoints of runs from before orbax -----------------------------------
+
+
+def _legacy_checkpoints(logdir: str) -> list[str]:
+  paths = glob.glob(os.path.join(_directory(logdir), _LEGACY_PREFIX + '*'))
+  return [p for p in paths
+          if os.path.basename(p)[len(_LEGACY_PREFIX):].isdigit()
+          and os.path.exists(os.path.join(p, STATE_FILE))]
+
+
+def _remove_legacy(logdir: str, keep: int, best: bool) -> None:
+  """Deletes the checkpoints from before orbax that are no longer among
+  the newest `keep` (and the old `best/` once there is a new best), and
+  what their writers left when killed (`.tmp-<pid>`, once it is dead)."""
+  run_dir.remove_stale(_directory(logdir))
+  old = set(_legacy_checkpoints(logdir))
+  for path in list_checkpoints(logdir)[:-keep]:
+    if path in old:
+      shutil.rmtree(path)
+  if best:
+    shutil.rmtree(os.path.join(_directory(logdir), BEST), ignore_errors=True)
+
+
+def _read_legacy_state(checkpoint: str) -> dict[str, Any]:
+  """The state.json of a checkpoint from before orbax."""
+  import json  # pylint: disable=g-import-not-at-top
   path = os.path.join(checkpoint, STATE_FILE)
   try:
     with open(path) as f:
@@ -151,46 +318,22 @@ def read_state(checkpoint: str) -> dict[str, Any]:
     raise CorruptCheckpoint(f'{path} cannot be read ({e}).') from None
   if not isinstance(state, dict):
     raise CorruptCheckpoint(f'{path} holds no checkpoint state.')
-  if state.get('format') != FORMAT:
+  if state.get('format') != 1:
     raise ValueError(f'{checkpoint} has checkpoint format '
-                     f'{state.get("format")}, expected {FORMAT}.')
+                     f'{state.get("format")}, expected 1.')
   return state
 
 
-def check_complete(checkpoint: str) -> dict[str, Any]:
-  """Reads `checkpoint` through (state.json and every species' learner
-  file) without building learners; returns the state.
-
-  Raises:
-    CorruptCheckpoint: naming the first file that does not read completely.
-  """
-  from flax import serialization  # pylint: disable=g-import-not-at-top
-  state = read_state(checkpoint)
+def _check_legacy(checkpoint: str) -> dict[str, Any]:
+  from agents import checkpointing  # pylint: disable=g-import-not-at-top
+  state = _read_legacy_state(checkpoint)
   for species in state.get('species', []):
     path = os.path.join(checkpoint, f'{species["name"]}.msgpack')
     try:
-      with open(path, 'rb') as f:
-        contents = serialization.msgpack_restore(f.read())
+      contents = checkpointing.read_file(path)
     except Exception as e:  # pylint: disable=broad-except
       # msgpack raises ValueError ("incomplete input") or its own errors.
       raise CorruptCheckpoint(f'{path} cannot be read ({e}).') from None
     if not isinstance(contents, dict) or 'state' not in contents:
       raise CorruptCheckpoint(f'{path} holds no learner state.')
   return state
-
-
-def restore(checkpoint: str, learners: Mapping[str, Any]) -> dict[str, Any]:
-  """Restores every species' learner; returns the state dict."""
-  state = read_state(checkpoint)
-  missing = [n for n in learners
-             if not os.path.exists(os.path.join(checkpoint, f'{n}.msgpack'))]
-  if missing:
-    raise ValueError(f'{checkpoint} holds no learner for species {missing}.')
-  for name, learner in learners.items():
-    learner.restore(os.path.join(checkpoint, f'{name}.msgpack'))
-  return state
-
-
-def run_directory(checkpoint: str) -> str:
-  """The run directory a checkpoint directory belongs to."""
-  return os.path.dirname(os.path.dirname(os.path.abspath(checkpoint)))

@@ -63,12 +63,12 @@ class TrainArgs:
   """Continue from the newest checkpoint in logdir that reads completely."""
   resume_from: str = _resumable('')
   """Continue from this checkpoint directory of the run (e.g.
-  <logdir>/checkpoints/ckpt_00000004); implies --resume, and --logdir
+  <logdir>/checkpoints/4); implies --resume, and --logdir
   defaults to its run."""
   paradigm: str = fields.field('position', fields.one_of(*PARADIGMS))
   """Command paradigm of the lower layer: position or velocity."""
   controller: str = _resumable('')
-  """Folder of a lower-layer controller (agents.lowlevel.save); empty uses
+  """Folder of a lower-layer controller (agents.lowlevel.files); empty uses
   the weights shipped for --paradigm."""
   command_period: float = fields.field(0.5, fields.POSITIVE)
   """Seconds between two commands of the middle layer."""

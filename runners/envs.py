@@ -35,7 +35,7 @@ def read_controller(paradigm: str, directory: str = '') -> dict[str, bytes]:
 
   Args:
     paradigm: 'position' or 'velocity'.
-    directory: a folder written by `agents.lowlevel.save`; empty for the
+    directory: a controller folder (`agents.lowlevel.files`); empty for the
       weights shipped with the package.
 
   Returns:

@@ -116,7 +116,8 @@ def load_model(path: str, args: EvalArgs):
                                      species.action_size,
                                      species.global_state_size)
     learner = builder.make_learner(networks)
-    learner.restore(os.path.join(checkpoint, f'{species.name}.msgpack'))
+    learner.restore(checkpoints.saved_learner(checkpoint, species.name),
+                    source=f'{checkpoint} ({species.name})')
     models[species.name] = (species, builder, networks, learner)
   return spec, config, models, {**state, 'checkpoint': checkpoint}
 
@@ -320,12 +321,8 @@ def main(argv=None):
 def write_json(path: str, data) -> None:
   """Writes `data` as JSON to `path` whole (a temporary file renamed into
   place), creating its folder."""
-  os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-  tmp = f'{path}.tmp-{os.getpid()}'
-  with open(tmp, 'w') as f:
-    json.dump(data, f, indent=1)
-    f.write('\n')
-  os.replace(tmp, path)
+  from runners import run_dir  # pylint: disable=g-import-not-at-top
+  run_dir.write_file(path, json.dumps(data, indent=1) + '\n')
 
 
 if __name__ == '__main__':

@@ -165,7 +165,8 @@ def initialize_from_runs(args: config_lib.TrainArgs,
       raise ValueError(f'{where}: {source} has species {names}, not '
                        f'{species!r}.')
     learners[species].initialize_from(
-        os.path.join(source, f'{species}.msgpack'))
+        checkpoints.saved_learner(source, species),
+        source=f'{source} ({species})')
     print(f'{species}: parameters and normalisers from {source}', flush=True)
 
 
@@ -196,6 +197,8 @@ def _train(args, checkpoint, on_iteration):
     window.restore(saved.get('window', []))
     if saved.get('best_score') is not None:  # JSON gives a list.
       best_score = tuple(saved['best_score'])
+    # Later iterations are redone, as the metrics rows after this one.
+    checkpoints.discard_after(args.logdir, counters['iteration'])
   state = {'args': args.to_dict(), 'agent_config': config_lib.json_safe(
       dataclasses.asdict(config)), 'species': [s.to_dict() for s in layout]}
   per_iteration = (args.num_actors * args.envs_per_actor
@@ -216,11 +219,11 @@ def _train(args, checkpoint, on_iteration):
   learning = False
   row = {}
 
-  def save():
+  def save(score=None):
     return checkpoints.save(
         args.logdir, learners,
         {**counters, **state, 'window': window.state(),
-         'best_score': best_score}, args.keep_checkpoints)
+         'best_score': best_score}, args.keep_checkpoints, score)
 
   pool = None
   try:
@@ -262,15 +265,13 @@ def _train(args, checkpoint, on_iteration):
         log.write(row)
         progress.update(row, steps)
         score = _window_score(row) if window.full else None
-        if args.keep_best and score and (best_score is None
-                                         or score > best_score):
+        best = args.keep_best and score and (best_score is None
+                                             or score > best_score)
+        if best:
           best_score = score
-          checkpoints.save_best(args.logdir, learners, {
-              **counters, **state, 'window': window.state(),
-              'best_score': best_score})
-        if (counters['iteration'] % args.checkpoint_every == 0
+        if (best or counters['iteration'] % args.checkpoint_every == 0
             or counters['iteration'] == iterations or stop.requested):
-          save()
+          save(score if best else None)
           saved_at = counters['iteration']
         if on_iteration is not None:
           on_iteration(counters['iteration'], row, pool)

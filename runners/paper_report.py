@@ -16,6 +16,7 @@ from runners import baselines
 from runners import evaluate
 from runners import paper
 from runners import paper_plan
+from runners import run_dir
 
 INTRODUCTION = ('The plan of docs/paper.md, regenerated from the committed '
                 '`results/paper/` with `coop-paper --report --docs '
@@ -249,7 +250,4 @@ def write_block(path: str, text: str) -> None:
   else:
     document = (document.rstrip('\n') + '\n\n## The paper\'s experiments\n\n'
                 + INTRODUCTION + '\n\n' + block + '\n')
-  tmp = f'{path}.tmp-{os.getpid()}'
-  with open(tmp, 'w') as f:
-    f.write(document)
-  os.replace(tmp, path)
+  run_dir.write_file(path, document)

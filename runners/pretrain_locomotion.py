@@ -13,9 +13,10 @@ planar velocity command). Both add the paper's alive/up/cost terms.
 Writes to `--logdir` (default `runs/lowlevel_<paradigm>`): `metrics.csv` and
 TensorBoard events (one row per PPO update: env steps, wall time, episode
 figures over the last 100 episodes, losses), `run_config.json`,
-`checkpoints/` (the last few, written atomically; `--resume` continues from
-the newest) and, at the end, the exported controller in `controller/` (see
-`agents.lowlevel.controller`). Ctrl-C or SIGTERM stops after the current
+`checkpoints/` (the last few, orbax steps as `coop-train` writes them;
+`--resume` continues from the newest) and, at the end, the exported
+controller in `controller/` (see `agents.lowlevel.controller`, written
+whole). Ctrl-C or SIGTERM stops after the current
 update, with a checkpoint and the export; a second one stops at once.
 
 Position-paradigm default: the target is NOT redrawn when reached
@@ -36,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from agents import fields
+from runners import checkpoints
 from runners import cli
 from runners import run_dir
 from runners import vector_env
@@ -50,6 +52,8 @@ EPISODE_METRICS = {
                  'failure', 'reward/velocity'),
 }
 SUCCESS_METRIC = {'position': 'success', 'velocity': 'velocity_cosine'}
+WALKER = 'walker'
+"""The learner's name in checkpoints (`runners.checkpoints`)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -187,7 +191,8 @@ def export(args, learner, envs_info, counters, summary=None):
   from agents.lowlevel import controller as controller_lib  # pylint: disable=g-import-not-at-top
   params, normalizer = learner.get_variables(['params', 'normalizer'])
   config = run_config(args)
-  controller_lib.save(args.export_dir, params['policy'], normalizer, {
+  run_dir.write_directory(args.export_dir, controller_lib.files(
+      params['policy'], normalizer, {
       'paradigm': args.paradigm,
       'task': args.task(),
       'observation_keys': list(envs_info['keys']),
@@ -197,7 +202,7 @@ def export(args, learner, envs_info, counters, summary=None):
       'env_config': config['env_config'],
       'training': {**counters, 'seed': args.seed,
                    'final_metrics': summary or {}},
-  })
+  }))
 
 
 def _prepare_logdir(args: Args) -> bool:
@@ -247,7 +252,10 @@ def _train(args: Args) -> dict[str, Any]:
   learner = builder.make_learner(networks)
   counters = {'update': 0, 'env_steps': 0, 'wall_time': 0.0}
   if resuming:
-    counters = run_dir.restore_checkpoint(learner, args.logdir)
+    saved = checkpoints.restore(checkpoints.resolve(args.logdir),
+                                {WALKER: learner})
+    counters = {k: saved[k] for k in counters}
+    checkpoints.discard_after(args.logdir, counters['update'])
   if args.export_only:
     export(args, learner, info, counters,
            summary=run_dir.logged_row(args.logdir, counters['update']))
@@ -325,7 +333,9 @@ def _loop(args, envs, actor, learner, log, counters, stop):
               + ' '.join(f'{k} {v}' for k, v in postfix.items()), flush=True)
       if (counters['update'] % args.checkpoint_every == 0 or stop.requested
           or counters['env_steps'] >= args.total_env_steps):
-        run_dir.save_checkpoint(learner, args.logdir, counters, args.keep_checkpoints)
+        checkpoints.save(args.logdir, {WALKER: learner},
+                         {'iteration': counters['update'], **counters},
+                         args.keep_checkpoints)
   return row
 
 

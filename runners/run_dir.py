@@ -4,15 +4,16 @@ Shared by the runners so that every run directory looks the same:
 
   writer.lock                          held by the run's one writer (`RunLock`)
   metrics.csv, events.out.tfevents.*   one row per update (`MetricsLog`)
-  checkpoints/ckpt_<update>.msgpack    the learner's state (`learner.save`)
-  checkpoints/ckpt_<update>.json       the runner's counters, written last
+  checkpoints/<update>/                orbax checkpoints (`runners.checkpoints`)
 
-Every write survives a kill at any instant: files and directories are
-written under a temporary name ending in `.tmp-<pid>` and renamed into
-place; a directory that replaces another (`replace_directory`) moves the old
-one aside to `.old-<pid>` first, and `recover_directory` puts it back if the
-writer died between the two renames. Leftovers are removed only once their
-writer's process is gone (`remove_stale`).
+Every write survives a kill at any instant: files (`write_file`) and
+directories (`write_directory`) are written under a temporary name ending in
+`.tmp-<pid>` and renamed into place; a directory that replaces another
+(`replace_directory`) moves the old one aside to `.old-<pid>` first, and
+`recover_directory` puts it back if the writer died between the two renames.
+Leftovers are removed only once their writer's process is gone
+(`remove_stale`). These are the project's only writers of whole files and
+directories; checkpoints go through orbax, which finalises its own.
 
 `GracefulStop` turns the first Ctrl-C / SIGTERM into a request the training
 loop polls, so a run can stop with a checkpoint instead of losing an update.
@@ -21,7 +22,7 @@ import csv
 import errno
 import fcntl
 import glob
-import json
+import io
 import math
 import os
 import re
@@ -155,6 +156,22 @@ def replace_directory(tmp: str, final: str) -> None:
   _remove(old)
 
 
+def _write_synced(path: str, data) -> None:
+  with open(path, 'w' if isinstance(data, str) else 'wb') as f:
+    f.write(data)
+    f.flush()
+    os.fsync(f.fileno())
+
+
+def write_file(path: str, data) -> None:
+  """Writes `data` (bytes or str) to `path` whole (a temporary file, synced
+  and renamed into place), replacing an earlier one; creates its folder."""
+  os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+  tmp = f'{path}.tmp-{os.getpid()}'
+  _write_synced(tmp, data)
+  os.replace(tmp, path)
+
+
 def write_directory(final: str, files) -> None:
   """Writes {name: bytes} as the directory `final`, atomically (all files
   or none), replacing an earlier one."""
@@ -162,10 +179,7 @@ def write_directory(final: str, files) -> None:
   _remove(tmp)
   os.makedirs(tmp)
   for name, data in files.items():
-    with open(os.path.join(tmp, name), 'wb') as f:
-      f.write(data)
-      f.flush()
-      os.fsync(f.fileno())
+    _write_synced(os.path.join(tmp, name), data)
   replace_directory(tmp, final)
 
 
@@ -184,44 +198,6 @@ def remove_stale(directory: str) -> None:
       recover_directory(path[:match.start()])
     else:
       _remove(path)
-
-
-# --- Checkpoints -------------------------------------------------------------
-
-
-def checkpoint_paths(logdir):
-  """[(update, msgpack path, json path)] of complete checkpoints, oldest first."""
-  out = []
-  for meta in sorted(glob.glob(os.path.join(logdir, 'checkpoints',
-                                            'ckpt_*.json'))):
-    state = meta[:-len('.json')] + '.msgpack'
-    if os.path.exists(state):
-      out.append((int(os.path.basename(meta)[5:-5]), state, meta))
-  return sorted(out)
-
-
-def save_checkpoint(learner, logdir, counters, keep):
-  """learner state + counters, each file atomic; keeps the newest `keep`."""
-  base = os.path.join(logdir, 'checkpoints', f'ckpt_{counters["update"]:08d}')
-  learner.save(base + '.msgpack')
-  tmp = f'{base}.json.tmp-{os.getpid()}'
-  with open(tmp, 'w') as f:
-    json.dump(counters, f)
-  os.replace(tmp, base + '.json')  # Written last: marks the pair complete.
-  for _, state, meta in checkpoint_paths(logdir)[:-keep]:
-    os.remove(meta)
-    os.remove(state)
-
-
-def restore_checkpoint(learner, logdir):
-  """Restores the newest checkpoint; returns its counters."""
-  paths = checkpoint_paths(logdir)
-  if not paths:
-    raise FileNotFoundError(f'No checkpoint in {logdir}/checkpoints.')
-  _, state, meta = paths[-1]
-  learner.restore(state)
-  with open(meta) as f:
-    return json.load(f)
 
 
 # --- Logging -----------------------------------------------------------------
@@ -263,14 +239,11 @@ class MetricsLog:
                 if int(r['update']) <= resume_update]
     # The kept rows go to a new file that replaces the old one: a kill
     # while writing leaves the old file whole.
-    tmp = f'{self._path}.tmp-{os.getpid()}'
-    with open(tmp, 'w', newline='') as f:
-      writer = csv.DictWriter(f, self.columns, extrasaction='ignore')
-      writer.writeheader()
-      writer.writerows(rows)
-      f.flush()
-      os.fsync(f.fileno())
-    os.replace(tmp, self._path)
+    kept = io.StringIO(newline='')
+    writer = csv.DictWriter(kept, self.columns, extrasaction='ignore')
+    writer.writeheader()
+    writer.writerows(rows)
+    write_file(self._path, kept.getvalue())
     self._file = open(self._path, 'a', newline='')
     self._csv = csv.DictWriter(self._file, self.columns, extrasaction='ignore')
     self._tb = None

@@ -9,7 +9,7 @@
 
 Writes to --logdir (default runs/<task>_<agent>_n<N>_s<seed>): metrics.csv
 and TensorBoard events (every reward term, success, losses, steps/s),
-checkpoints/ckpt_<iteration>/ (atomic, the newest --keep-checkpoints kept),
+checkpoints/<iteration>/ (orbax, atomic; the newest --keep-checkpoints and the best kept),
 controller/ (the lower layer the run uses). See docs/training.md.
 Evaluate with `coop-eval --checkpoint <logdir>`.
 """

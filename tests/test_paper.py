@@ -90,7 +90,7 @@ def test_dry_run_prints_every_cell_with_its_status(tmp_path, capsys):
   os.makedirs(os.path.join(logdir, 'checkpoints', 'ckpt_00000003'))
   with open(os.path.join(logdir, 'checkpoints', 'ckpt_00000003',
                          'state.json'), 'w') as f:
-    json.dump({'format': checkpoints.FORMAT, 'iteration': 3,
+    json.dump({'format': 1, 'iteration': 3,  # A run from before orbax.
                'env_steps': 1_500_000, 'species': []}, f)
   paper.main(['--dry-run', '--results', args.results, '--runs', args.runs])
   lines = capsys.readouterr().out.splitlines()
@@ -166,7 +166,7 @@ def test_the_plan_skips_done_cells_and_resumes_a_partial_one(
   assert sorted(os.listdir(folder)) == ['checkpoints', 'controller',
                                         'eval_n2.json', 'eval_n3.json',
                                         'metrics.csv']
-  assert os.listdir(os.path.join(folder, 'checkpoints')) == ['ckpt_00000002']
+  assert os.listdir(os.path.join(folder, 'checkpoints')) == ['2']
   assert paper.status(partial, args).state == 'done'
   assert not os.path.exists(stashed)  # Published: the stash is spent.
   for n in (2, 3):

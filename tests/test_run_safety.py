@@ -1,6 +1,7 @@
 """A run directory under every mistake: a second writer, kills in the middle
 of a write, damaged checkpoints, bad flags, SIGTERM."""
 import csv
+import json
 import os
 import shutil
 import signal
@@ -8,6 +9,9 @@ import subprocess
 import sys
 import textwrap
 
+from flax import serialization
+import jax
+import numpy as np
 import pytest
 
 from runners import checkpoints
@@ -28,14 +32,14 @@ pytestmark = pytest.mark.filterwarnings('ignore:os.fork:RuntimeWarning')
 
 
 FAKE_LEARNER = """
-import msgpack
+import numpy as np
 class FakeLearner:
-  # Writes a learner file flax reads (msgpack), without networks.
+  # A saved learner state without networks.
   def __init__(self, value):
     self.value = value
-  def save(self, path):
-    with open(path, 'wb') as f:
-      f.write(msgpack.packb({'format': 1, 'state': {'w': [self.value] * 3}}))
+  def save(self):
+    return {'format': 1, 'kind': 'fake',
+            'state': {'w': np.full(3, self.value, np.float32)}}
 """
 exec(FAKE_LEARNER)  # pylint: disable=exec-used
 
@@ -44,9 +48,19 @@ def _state(iteration):
   return {'iteration': iteration, 'species': [{'name': 'ant'}]}
 
 
-def _save(logdir, iteration, keep=5):
+def _save(logdir, iteration, keep=5, score=None):
   return checkpoints.save(logdir, {'ant': FakeLearner(iteration)},
-                          _state(iteration), keep)
+                          _state(iteration), keep, score)
+
+
+def _truncate_arrays(checkpoint):
+  """Cuts every array file of an orbax step in half (a copy cut short)."""
+  for directory, _, names in os.walk(os.path.join(checkpoint, 'learners')):
+    if os.path.basename(directory) == 'd':
+      for name in names:
+        path = os.path.join(directory, name)
+        with open(path, 'r+b') as f:
+          f.truncate(os.path.getsize(path) // 2)
 
 
 def _holder(script):
@@ -98,15 +112,14 @@ def test_training_takes_the_lock_before_checking_the_directory(controller,
 
 
 def test_only_dead_writers_temporaries_are_removed(tmp_path):
-  logdir = str(tmp_path)
-  directory = os.path.join(logdir, 'checkpoints')
+  directory = str(tmp_path / 'controller')
   holder = _holder('pass')
   try:
-    live = os.path.join(directory, f'ckpt_00000002.tmp-{holder.pid}')
-    dead = os.path.join(directory, f'ckpt_00000003.tmp-{_dead_pid()}')
+    live = f'{directory}.tmp-{holder.pid}'
+    dead = f'{directory}.tmp-{_dead_pid()}'
     for path in (live, dead):
       os.makedirs(path)
-    _save(logdir, 1)
+    run_dir.remove_stale(str(tmp_path))
     assert os.path.isdir(live)  # Another writer's work in progress.
     assert not os.path.exists(dead)
   finally:
@@ -120,20 +133,18 @@ def test_only_dead_writers_temporaries_are_removed(tmp_path):
 def test_damaged_newest_checkpoint_is_named_and_passed_over(tmp_path):
   logdir = str(tmp_path)
   paths = [_save(logdir, i) for i in (1, 2, 3)]
-  learner_file = os.path.join(paths[2], 'ant.msgpack')
-  with open(learner_file, 'r+b') as f:
-    f.truncate(os.path.getsize(learner_file) // 2)
+  _truncate_arrays(paths[2])
   reports = []
   assert checkpoints.resolve(logdir, reports.append) == paths[1]
-  assert learner_file in reports[0] and paths[1] in reports[0]
+  assert paths[2] in reports[0] and paths[1] in reports[0]
   # Named when asked for by name.
-  with pytest.raises(checkpoints.CorruptCheckpoint, match=learner_file):
+  with pytest.raises(checkpoints.CorruptCheckpoint, match=paths[2]):
     checkpoints.resolve(paths[2])
-  # An empty state.json too.
-  open(os.path.join(paths[1], checkpoints.STATE_FILE), 'w').close()
+  # An empty state item too.
+  open(os.path.join(paths[1], 'state', 'metadata'), 'w').close()
   reports.clear()
   assert checkpoints.resolve(logdir, reports.append) == paths[0]
-  assert os.path.join(paths[1], checkpoints.STATE_FILE) in reports[0]
+  assert paths[1] in reports[0]
   shutil.rmtree(paths[0])
   with pytest.raises(checkpoints.CorruptCheckpoint, match='reads completely'):
     checkpoints.resolve(logdir)
@@ -153,10 +164,9 @@ def test_resume_and_eval_fall_back_from_a_damaged_checkpoint(
   logdir = str(tmp_path / 'damaged')
   shutil.copytree(run3, logdir)
   newest = checkpoints.list_checkpoints(logdir)[-1]
-  assert newest.endswith('ckpt_00000003')
-  learner_file = os.path.join(newest, 'ant.msgpack')
-  with open(learner_file, 'r+b') as f:
-    f.truncate(100)
+  assert newest.endswith(os.path.join('checkpoints', '3'))
+  learner_file = newest
+  _truncate_arrays(newest)
   controller_file = os.path.join(logdir, 'controller', 'config.json')
   before = os.stat(controller_file)
 
@@ -164,7 +174,8 @@ def test_resume_and_eval_fall_back_from_a_damaged_checkpoint(
   evaluate.main(['--checkpoint', logdir, '--episodes', '1', '--envs', '1',
                  '--video', video, '--width', '64', '--height', '48'])
   captured = capsys.readouterr()
-  assert learner_file in captured.err and 'ckpt_00000002' in captured.err
+  assert learner_file in captured.err and os.path.join(
+      'checkpoints', '2.') in captured.err
   assert 'model 1/1, seed 0: 1 episodes, success 0.0%' in captured.err
   assert 'success rate' in captured.out
   # The tiny policy does not move a cylinder in 0.8 s.
@@ -174,7 +185,8 @@ def test_resume_and_eval_fall_back_from_a_damaged_checkpoint(
                                      total_steps=3 * STEPS))
   out = capsys.readouterr()
   assert learner_file in out.err
-  assert 'resuming from' in out.out and 'ckpt_00000002' in out.out
+  assert 'resuming from' in out.out and out.out.split('resuming from ')[1] \
+      .startswith(os.path.join(logdir, 'checkpoints', '2'))
   assert summary['update'] == 3
   assert [int(r['update']) for r in _rows(logdir)] == [1, 2, 3]
   checkpoints.check_complete(newest)  # Iteration 3 was written again.
@@ -185,7 +197,7 @@ def test_resume_and_eval_fall_back_from_a_damaged_checkpoint(
 
   # --resume-from picks one (implies --resume; later rows go), and SIGTERM
   # stops with a checkpoint and the status of a signal, not success's 0.
-  chosen = os.path.join(logdir, 'checkpoints', 'ckpt_00000002')
+  chosen = os.path.join(logdir, 'checkpoints', '2')
   with pytest.raises(ValueError, match='not a checkpoint of --logdir'):
     learner_loop.train(_args(str(tmp_path / 'other'), controller,
                              resume_from=chosen))
@@ -205,28 +217,105 @@ def test_resume_and_eval_fall_back_from_a_damaged_checkpoint(
 # --- 3. Crash-safe writes ------------------------------------------------------
 
 
-def test_best_survives_a_kill_between_its_two_renames(tmp_path):
+def test_a_checkpoint_killed_while_written_is_never_read(tmp_path):
   logdir = str(tmp_path)
-  best = checkpoints.save_best(logdir, {'ant': FakeLearner(1.0)}, _state(1))
+  first = _save(logdir, 1)
   script = FAKE_LEARNER + textwrap.dedent(f'''
       import os
       from runners import checkpoints
-      replace = os.replace
-      def replace_or_die(source, target):
-        if '.tmp-' in source and target.endswith('best'):
-          os._exit(9)  # Killed after the old best was moved aside.
-        replace(source, target)
-      os.replace = replace_or_die
-      checkpoints.save_best({logdir!r}, {{'ant': FakeLearner(2.0)}},
-                            {_state(2)!r})
+      rename = os.rename
+      def rename_or_die(source, target):
+        if 'orbax-checkpoint-tmp' in str(source):
+          os._exit(9)  # Killed with the checkpoint written, not finalised.
+        rename(source, target)
+      os.rename = rename_or_die
+      checkpoints.save({logdir!r}, {{'ant': FakeLearner(2.0)}}, {_state(2)!r},
+                       5)
       ''')
   result = subprocess.run([sys.executable, '-c', script],
                           cwd=REPO, check=False)
   assert result.returncode == 9
-  assert checkpoints.read_state(checkpoints.resolve(best))['iteration'] == 1
-  checkpoints.save_best(logdir, {'ant': FakeLearner(3.0)}, _state(3))
-  assert checkpoints.read_state(best)['iteration'] == 3
-  assert os.listdir(os.path.dirname(best)) == ['best']  # No leftovers.
+  directory = os.path.join(logdir, 'checkpoints')
+  assert len(os.listdir(directory)) == 2  # The whole of 1, a temporary 2.
+  assert checkpoints.list_checkpoints(logdir) == [first]
+  assert checkpoints.resolve(logdir) == first
+  second = _save(logdir, 2)  # The next writer removes the temporary.
+  assert sorted(os.listdir(directory)) == ['1', '2']
+  assert checkpoints.saved_learner(second, 'ant')['state']['w'][0] == 2.0
+
+
+def test_the_newest_and_the_best_are_kept(tmp_path):
+  logdir = str(tmp_path)
+  assert checkpoints.list_checkpoints(logdir) == []
+  scores = {2: (0.5, 1.0), 3: (0.5, 2.0), 4: (0.4, 9.0)}  # 3 is the best.
+  paths = [_save(logdir, i, keep=2, score=scores.get(i)) for i in range(1, 7)]
+  assert checkpoints.list_checkpoints(logdir) == [paths[2], paths[4],
+                                                  paths[5]]
+  best = os.path.join(logdir, 'checkpoints', checkpoints.BEST)
+  assert checkpoints.resolve(best) == paths[2]
+  assert checkpoints.resolve(logdir) == paths[5]
+  state = checkpoints.read_state(paths[2])
+  assert state['iteration'] == 3 and state['format'] == checkpoints.FORMAT
+  checkpoints.discard_after(logdir, 4)  # A run resumed from 4 redoes 5, 6.
+  assert checkpoints.list_checkpoints(logdir) == [paths[2]]
+  other = str(tmp_path / 'other')
+  _save(other, 1)
+  with pytest.raises(FileNotFoundError, match='No checkpoint'):
+    checkpoints.resolve(os.path.join(other, 'checkpoints', checkpoints.BEST))
+
+
+def _to_old_layout(checkpoint, learners):
+  """`checkpoint` as a run from before orbax wrote it:
+  `ckpt_<iteration>/` with `<species>.msgpack` (what `learner.save(path)`
+  wrote) and `state.json`; returns that directory."""
+  state = checkpoints.restore(checkpoint, learners)
+  del state['learners']
+  old = os.path.join(os.path.dirname(checkpoint),
+                     f'ckpt_{state["iteration"]:08d}')
+  os.makedirs(old)
+  for name, learner in learners.items():
+    with open(os.path.join(old, f'{name}.msgpack'), 'wb') as f:
+      f.write(serialization.msgpack_serialize(learner.save()))
+  with open(os.path.join(old, checkpoints.STATE_FILE), 'w') as f:
+    json.dump({**state, 'format': 1}, f)
+  shutil.rmtree(checkpoint)
+  return old
+
+
+def test_a_run_from_before_orbax_evaluates_and_resumes(run3, controller,
+                                                       tmp_path, capsys):
+  logdir = str(tmp_path / 'old')
+  shutil.copytree(run3, logdir)
+  new = checkpoints.list_checkpoints(logdir)
+  spec, config, models, _ = evaluate.load_model(
+      new[1], evaluate.EvalArgs(checkpoint=(logdir,)))
+  learners = {name: model[3] for name, model in models.items()}
+  want = {n: jax.device_get(l.state) for n, l in learners.items()}
+  old = [_to_old_layout(c, learners) for c in new]
+  assert checkpoints.list_checkpoints(logdir) == old
+  assert checkpoints.resolve(logdir) == old[-1]
+  del spec, config
+  # The old files restore the same state, bit for bit.
+  _, _, models, state = evaluate.load_model(old[1], evaluate.EvalArgs(
+      checkpoint=(logdir,)))
+  assert state['iteration'] == 2
+  for name, model in models.items():
+    for a, b in zip(jax.tree.leaves(want[name]),
+                    jax.tree.leaves(jax.device_get(model[3].state))):
+      np.testing.assert_array_equal(a, b)
+  evaluate.main(['--checkpoint', logdir, '--episodes', '1', '--envs', '1'])
+  assert 'iteration 3' in capsys.readouterr().out
+
+  # Resumed, it continues from the old iteration 3 in orbax steps; the old
+  # checkpoints go as the newest --keep-checkpoints (3) replace them.
+  summary = learner_loop.train(_args(logdir, controller, resume=True,
+                                     total_steps=5 * STEPS))
+  assert summary['update'] == 5
+  assert 'resuming from ' + old[-1] in capsys.readouterr().out
+  assert [os.path.basename(p) for p in checkpoints.list_checkpoints(
+      logdir)] == ['ckpt_00000003', '4', '5']
+  assert checkpoints.read_state(checkpoints.resolve(logdir))['episodes'] > (
+      checkpoints.read_state(old[-1])['episodes'])
 
 
 def test_metrics_csv_survives_a_kill_while_resuming(tmp_path, monkeypatch):

@@ -26,6 +26,7 @@ from runners import config as config_lib
 from runners import envs as envs_lib
 from runners import evaluate
 from runners import learner_loop
+from runners import run_dir
 from runners import train
 
 # 2 copies x 4 commands of 0.1 s (2 control steps): 16 env steps/iteration.
@@ -50,13 +51,13 @@ def controller(tmp_path_factory):
   keys = obs_lib.observation_keys(spec)
   sizes = obs_lib.observation_sizes(spec, keys)
   networks = policy_value.make_policy_value_networks(sum(sizes), 8, (8,), (8,))
-  controller_lib.save(
-      directory, networks.init(jax.random.PRNGKey(0))['policy'],
+  run_dir.write_directory(directory, controller_lib.files(
+      networks.init(jax.random.PRNGKey(0))['policy'],
       normalization.init(sum(sizes)),
       {'paradigm': 'position', 'observation_keys': list(keys),
        'observation_sizes': list(sizes), 'action_size': 8,
        'ppo_config': dataclasses.asdict(ppo_config.PPOConfig(
-           policy_hidden=(8,), value_hidden=(8,)))})
+           policy_hidden=(8,), value_hidden=(8,)))}))
   return directory
 
 
@@ -91,7 +92,7 @@ def _learner_params(checkpoint, species):
       saved['observation_size'], saved['action_size'],
       saved['global_state_size']))
   initial = jax.device_get(learner.get_variables(['params'])[0])
-  learner.restore(os.path.join(checkpoint, f'{species}.msgpack'))
+  learner.restore(checkpoints.saved_learner(checkpoint, species))
   return initial, jax.device_get(learner.get_variables(['params'])[0])
 
 
@@ -146,8 +147,7 @@ def test_checkpoints_keep_the_newest_and_resume_continues(controller, hrl_run,
   assert (summary['update'], summary['env_steps']) == (5, 5 * STEPS)
   assert [int(r['update']) for r in _rows(logdir)] == [1, 2, 3, 4, 5]
   kept = checkpoints.list_checkpoints(logdir)
-  assert [os.path.basename(p) for p in kept] == [
-      'ckpt_00000003', 'ckpt_00000004', 'ckpt_00000005']
+  assert [os.path.basename(p) for p in kept] == ['3', '4', '5']
   state = checkpoints.read_state(kept[-1])
   assert state['episodes'] > first['episodes']
   assert state['args']['total_steps'] == 5 * STEPS
@@ -167,10 +167,10 @@ def test_best_checkpoint_holds_the_best_full_window(controller, tmp_path,
   scores = [(float(r['success']), float(r['return'])) for r in rows]
   winner = rows[scores.index(max(scores))]  # First of equal scores.
   best = os.path.join(logdir, 'checkpoints', checkpoints.BEST)
-  state = checkpoints.read_state(best)
+  state = checkpoints.read_state(checkpoints.resolve(best))
   assert state['iteration'] == int(winner['update'])
   assert tuple(state['best_score']) == max(scores)
-  assert checkpoints.list_checkpoints(logdir)[-1].endswith('ckpt_00000006')
+  assert checkpoints.list_checkpoints(logdir)[-1].endswith('6')
   # The newest checkpoint carries the score, so a resumed run continues it.
   newest = checkpoints.read_state(checkpoints.resolve(logdir))
   assert tuple(newest['best_score']) == max(scores)
@@ -257,7 +257,7 @@ def test_the_stability_figures_are_logged_and_checkpointed(hrl_run):
   learner = builder.make_learner(builder.make_networks(
       saved['observation_size'], saved['action_size'],
       saved['global_state_size']))
-  learner.restore(os.path.join(checkpoint, 'ant.msgpack'))
+  learner.restore(checkpoints.saved_learner(checkpoint, 'ant'))
   assert float(learner.state.value_normalizer.count) == 2 * 4 * 4
   assert int(learner.state.update) == 2
 
@@ -297,7 +297,7 @@ def test_init_from_starts_each_species_from_its_stage_run(
   for species, run in ravine_stages.items():
     checkpoint = checkpoints.resolve(run)
     saved = _joint_learners(args)[species]
-    saved.restore(os.path.join(checkpoint, f'{species}.msgpack'))
+    saved.restore(checkpoints.saved_learner(checkpoint, species))
     got, want = jax.device_get(learners[species].state), jax.device_get(
         saved.state)
     for name in ('params', 'normalizer', 'value_normalizer'):
@@ -331,7 +331,7 @@ def test_init_from_refuses_what_does_not_fit(controller, ravine_stages,
   # Another network: named, not silently loaded.
   args = _args(tmp_path / 'joint', controller, middle_layer_size=16,
                init_from=(f'pusher={ravine_stages["pusher"]}',), **joint)
-  with pytest.raises(ValueError, match='pusher.msgpack.*(structure|shapes)'):
+  with pytest.raises(ValueError, match=r'\(pusher\).*(structure|shapes)'):
     learner_loop.initialize_from_runs(args, _joint_learners(args))
 
 

@@ -6,16 +6,16 @@
     env = lowlevel.CommandWrapper(coop_suite.load('transport', 4),
                                   controller, command_period=0.5)
 
-controller.py  Controller (deterministic, jit-compiled), save / load_from.
+controller.py  Controller (deterministic, jit-compiled), files / load_from.
 wrapper.py     CommandWrapper: per-agent commands instead of joint actions.
 weights/       trained controllers, one folder per paradigm.
 """
 import os
 
 from agents.lowlevel.controller import Controller
+from agents.lowlevel.controller import files
 from agents.lowlevel.controller import load_from
 from agents.lowlevel.controller import PARADIGMS
-from agents.lowlevel.controller import save
 
 WEIGHTS_DIR = os.path.join(os.path.dirname(__file__), 'weights')
 

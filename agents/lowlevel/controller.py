@@ -1,7 +1,8 @@
 """The frozen lower layer: a pretrained walker policy, deterministic.
 
-A controller is three small files in one directory, written by `save` (the
-pretraining runner calls it) and read by `load_from`:
+A controller is three small files in one directory, made by `files` (the
+pretraining runner writes them whole with `runners.run_dir.write_directory`)
+and read by `load_from`:
 
   params.msgpack   the policy network's parameters (flax msgpack; no critic)
   normalizer.npz   the observation statistics it was trained with
@@ -14,6 +15,7 @@ heading-frame m/s) to 8 joint actions in [-1, 1]: the mean of the trained
 policy, squashed by tanh.
 """
 import dataclasses
+import io
 import json
 import os
 from typing import Any, Mapping, Sequence, Union
@@ -35,20 +37,11 @@ PARADIGMS = {'position': 'command/target', 'velocity': 'command/velocity'}
 _FILES = ('params.msgpack', 'normalizer.npz', 'config.json')
 
 
-def _write_atomic(path, data: bytes):
-  tmp = f'{path}.tmp-{os.getpid()}'
-  with open(tmp, 'wb') as f:
-    f.write(data)
-  os.replace(tmp, path)
-
-
-def save(directory: str, policy_params: Any,
-         normalizer: normalization.NormalizerState,
-         config: Mapping[str, Any]) -> None:
-  """Writes a controller's three files into `directory` (created).
+def files(policy_params: Any, normalizer: normalization.NormalizerState,
+          config: Mapping[str, Any]) -> dict[str, bytes]:
+  """A controller's three files, {file name: contents}.
 
   Args:
-    directory: output folder.
     policy_params: the policy's Flax variables (`params['policy']`).
     normalizer: observation statistics.
     config: JSON-able dict with at least 'paradigm', 'observation_keys',
@@ -59,17 +52,14 @@ def save(directory: str, policy_params: Any,
               'action_size', 'ppo_config'):
     if key not in config:
       raise ValueError(f'Controller config needs {key!r}.')
-  os.makedirs(directory, exist_ok=True)
   params = jax.tree.map(lambda x: np.asarray(x, np.float32),
                         jax.device_get(policy_params))
-  _write_atomic(os.path.join(directory, 'params.msgpack'),
-                serialization.msgpack_serialize(params))
-  tmp = os.path.join(directory, f'normalizer.tmp-{os.getpid()}.npz')
-  np.savez(tmp, **normalization.to_dict(jax.device_get(normalizer)))
-  os.replace(tmp, os.path.join(directory, 'normalizer.npz'))
-  _write_atomic(os.path.join(directory, 'config.json'),
-                json.dumps({'format': FORMAT, **config}, indent=2,
-                           default=_jsonable).encode())
+  statistics = io.BytesIO()
+  np.savez(statistics, **normalization.to_dict(jax.device_get(normalizer)))
+  return {'params.msgpack': serialization.msgpack_serialize(params),
+          'normalizer.npz': statistics.getvalue(),
+          'config.json': json.dumps({'format': FORMAT, **config}, indent=2,
+                                    default=_jsonable).encode()}
 
 
 def _jsonable(value):
@@ -152,7 +142,7 @@ class Controller:
 
 
 def load_from(directory: str) -> Controller:
-  """Reads a controller written by `save`."""
+  """Reads a controller's directory (`files`)."""
   missing = [f for f in _FILES
              if not os.path.exists(os.path.join(directory, f))]
   if missing:

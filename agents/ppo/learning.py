@@ -10,7 +10,7 @@ then epochs x minibatches of SGD where each minibatch re-unrolls the network
 from the stored `initial_carry` (PureJaxRL `ppo_rnn`), with a KL-adaptive
 learning rate (`agents.ppo.step_size`). Minibatches permute the row axis B
 only, so sequences stay whole. `PPOLearner` wraps it with Acme's Learner
-interface and checkpoint files (`agents.checkpointing`).
+interface and saved states (`agents.checkpointing`).
 
 The config is a `PPOConfig` or a `HierarchyConfig`: both have the fields
 read here (`target_kl` and `normalize_values` are properties of PPOConfig).
@@ -251,9 +251,9 @@ def make_update_fn(networks, config, optimizer: optax.GradientTransformation):
 class PPOLearner(core.Learner):
   """Trains one policy (one species); publishes params and statistics.
 
-  Checkpoint files are `agents.checkpointing` files of kind `checkpoint_kind`
-  ('ppo'; the hierarchy's learner names its variant). `_upgrade` converts
-  the `older_formats` of that kind.
+  `save()` returns an `agents.checkpointing` saved state of kind
+  `checkpoint_kind` ('ppo'; the hierarchy's learner names its variant).
+  `_upgrade` converts the `older_formats` of that kind.
   """
 
   checkpoint_kind = _CHECKPOINT_KIND
@@ -310,10 +310,11 @@ class PPOLearner(core.Learner):
                        f'{sorted(variables)}.')
     return [variables[name] for name in names]
 
-  def save(self, path: str) -> None:
-    """Writes the full training state to `path`, atomically."""
-    checkpointing.save_state(path, self._state, self.checkpoint_kind,
-                             _CHECKPOINT_FORMAT)
+  def save(self) -> dict[str, Any]:
+    """The full training state (params, optimiser, statistics, update
+    counter, PRNG key) as a saved state of host arrays."""
+    return checkpointing.saved_state(self._state, self.checkpoint_kind,
+                                     _CHECKPOINT_FORMAT)
 
   def _upgrade(self, file_format: int,
                state_dict: dict[str, Any]) -> dict[str, Any]:
@@ -323,13 +324,15 @@ class PPOLearner(core.Learner):
     # It had no value or global-state statistics: they start as identities.
     return {**checkpointing.to_state_dict(self._state), **state_dict}
 
-  def _read_state_dict(self, path: str) -> dict[str, Any]:
-    """The state dict of a file written by `save`, in today's layout."""
-    file_format, state_dict = checkpointing.read(path, self.checkpoint_kind)
+  def _state_dict(self, saved: dict[str, Any], source: str
+                  ) -> dict[str, Any]:
+    """The state dict of a saved state, in today's layout."""
+    file_format, state_dict = checkpointing.unpack(
+        saved, self.checkpoint_kind, source)
     if file_format != _CHECKPOINT_FORMAT:
       if file_format not in self.older_formats:
         raise ValueError(
-            f'{path} is a {self.checkpoint_kind} checkpoint of format '
+            f'{source} is a {self.checkpoint_kind} checkpoint of format '
             f'{file_format}; this version reads formats '
             f'{[*self.older_formats, _CHECKPOINT_FORMAT]}.')
       state_dict = self._upgrade(file_format, state_dict)
@@ -338,28 +341,31 @@ class PPOLearner(core.Learner):
         del state_dict['step']
     return state_dict
 
-  def restore(self, path: str) -> None:
-    """Loads a file written by `save` with the same networks and config
-    (or an older format that `_upgrade` reads)."""
+  def restore(self, saved: dict[str, Any], source: str = 'checkpoint'
+              ) -> None:
+    """Continues from a state returned by `save` with the same networks and
+    config (or an older format that `_upgrade` reads); errors name
+    `source`."""
     self._state = checkpointing.from_state_dict(
-        path, self._state, self._read_state_dict(path))
+        source, self._state, self._state_dict(saved, source))
 
   # What a curriculum stage hands on (`initialize_from`); the rest (optimiser,
   # update counter, key and the global-state statistics, whose size depends
   # on the population) starts fresh.
   _HANDED_ON = ('params', 'normalizer', 'value_normalizer')
 
-  def initialize_from(self, path: str) -> None:
-    """Starts from another run's file written by `save` (e.g. a curriculum
-    stage): its parameters and its observation and value statistics, with
-    this learner's fresh optimiser, update counter and PRNG key.
+  def initialize_from(self, saved: dict[str, Any],
+                      source: str = 'checkpoint') -> None:
+    """Starts from another run's saved state (e.g. a curriculum stage): its
+    parameters and its observation and value statistics, with this
+    learner's fresh optimiser, update counter and PRNG key.
 
     Raises:
-      ValueError: the file is of another kind (variant), or its networks
-        differ from this learner's (naming the file).
+      ValueError: the state is of another kind (variant), or its networks
+        differ from this learner's (naming `source`).
     """
-    state_dict = self._read_state_dict(path)
+    state_dict = self._state_dict(saved, source)
     template = {name: getattr(self._state, name) for name in self._HANDED_ON}
     loaded = checkpointing.from_state_dict(
-        path, template, {name: state_dict[name] for name in self._HANDED_ON})
+        source, template, {name: state_dict[name] for name in self._HANDED_ON})
     self._state = self._state._replace(**loaded)

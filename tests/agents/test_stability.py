@@ -178,10 +178,8 @@ def test_checkpoints_round_trip_the_new_state_and_resume_bit_for_bit(
   interrupted = _learner()
   for batch in batches[:2]:
     interrupted.step(batch)
-  path = str(tmp_path / 'ant.msgpack')
-  interrupted.save(path)
   resumed = _learner()
-  resumed.restore(path)
+  resumed.restore(interrupted.save())
   saved = interrupted.state
   assert float(resumed.state.value_normalizer.count) == 2 * T * B
   np.testing.assert_array_equal(resumed.state.value_normalizer.mean,
@@ -205,6 +203,7 @@ def _write_format_1(path, learner):
       {'format': 1, 'kind': 'hierarchy/hrl', 'state': state})
   with open(path, 'wb') as f:
     f.write(data)
+  return checkpointing.read_file(path)
 
 
 @pytest.mark.parametrize('critic', ['separate', 'stop_gradient'])
@@ -214,10 +213,10 @@ def test_first_layout_checkpoints_load_with_the_same_policy_and_values(
   old_networks = _setup(critic='shared', target_kl=0.0)[2]
   old.step(_batch(old_networks, 7))
   path = str(tmp_path / 'ant.msgpack')
-  _write_format_1(path, old)
+  saved = _write_format_1(path, old)
 
   new = _learner(critic=critic)
-  new.restore(path)
+  new.restore(saved, source=path)
   networks = _setup(critic=critic)[2]
   batch = _batch(networks, 8)
   observation = jnp.asarray(batch.observation)
@@ -233,13 +232,10 @@ def test_first_layout_checkpoints_load_with_the_same_policy_and_values(
       [..., 0], old_value, rtol=1e-6)
   assert int(new.state.update) == 1
   new.step(batch)  # And it trains on.
-  with open(path, 'rb') as f:
-    contents = serialization.msgpack_restore(f.read())
-  contents['format'] = 99
-  with open(path, 'wb') as f:
-    f.write(serialization.msgpack_serialize(contents))
-  with pytest.raises(ValueError, match='format 99; this version reads'):
-    new.restore(path)
+  saved['format'] = 99
+  with pytest.raises(ValueError, match=f'{path} is a .* of format 99; this '
+                     'version reads'):
+    new.restore(saved, source=path)
   with pytest.raises(ValueError, match='not a hierarchy/mappo checkpoint'):
-    _learner('mappo').restore(path)
-  assert checkpointing.read(path, 'hierarchy/hrl')[0] == 99
+    _learner('mappo').restore(saved)
+  assert checkpointing.unpack(saved, 'hierarchy/hrl', path)[0] == 99
