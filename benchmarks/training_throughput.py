@@ -124,7 +124,7 @@ def one_core(args):
 
   train_args = _train_args(args, 1, '', time_limit=LONG_EPISODE)
   spec = learner_loop.environment_spec(train_args)
-  batch = rollout.EnvBatch(spec, config_lib.hierarchy_config(train_args),
+  batch = rollout.EnvBatch(spec, train_args.hierarchy,
                            range(args.envs_per_actor), global_state=False)
   recorders = [_Controls(copy.env) for copy in batch.envs]
   periods = max(1, args.block_steps // (batch.envs[0].low_level_steps

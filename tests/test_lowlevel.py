@@ -417,7 +417,7 @@ def test_copies_in_lockstep_step_exactly_as_each_copy_alone():
   from runners import rollout  # pylint: disable=g-import-not-at-top
   args = config_lib.TrainArgs(task='transport', n_agents=2, time_limit=1.2)
   spec = learner_loop.environment_spec(args)
-  batch = rollout.EnvBatch(spec, config_lib.hierarchy_config(args), [3, 4])
+  batch = rollout.EnvBatch(spec, args.hierarchy, [3, 4])
   alone = [spec.make(seed) for seed in (3, 4)]
   for env in alone:
     env.reset()
