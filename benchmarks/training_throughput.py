@@ -27,6 +27,7 @@ compilation) left out. Commands are random; the shipped lower layer
 walks unless --controller is given.
 """
 import argparse
+import dataclasses
 import json
 import os
 import subprocess
@@ -152,10 +153,11 @@ def pipeline(args, actors, logdir):
   """(env steps/s, learner's share) of coop-train's loop with `actors`."""
   rows = []
   train_args = _train_args(args, actors, logdir)
-  per_iteration = (actors * args.envs_per_actor * train_args.sequence_length
+  per_iteration = (actors * args.envs_per_actor
+                   * train_args.hierarchy.sequence_length
                    * round(train_args.command_period / 0.05))
-  train_args = config_lib.TrainArgs(**{
-      **vars(train_args), 'total_steps': per_iteration * args.iterations})
+  train_args = dataclasses.replace(
+      train_args, total_steps=per_iteration * args.iterations)
   learner_loop.train(train_args,
                      on_iteration=lambda i, row, pool: rows.append(row))
   rows = rows[1:]  # Without the first iteration.
