@@ -33,8 +33,9 @@ setuptools.setup(
         "flax",
         "optax",
         # Checkpoints (runners/checkpoints.py): CheckpointManager with
-        # preservation policies (LatestN + BestN); 0.12.8 is the one tested.
-        "orbax-checkpoint>=0.12.8",
+        # preservation policies (LatestN + BestN); 0.12.8 is the one tested,
+        # and orbax's API moves between minor versions.
+        "orbax-checkpoint>=0.12.8,<0.13",
         "ray[default]>=2.9",
         "imageio",
         "imageio-ffmpeg",
@@ -42,8 +43,9 @@ setuptools.setup(
         "matplotlib",
         "tensorboardX",
         # Every CLI (runners.cli); its private parse-error hook turns a
-        # refused value into one line, else tyro's own box.
-        "tyro>=1.0.17",
+        # refused value into one line, else tyro's own box: pinned to the
+        # minor version tested.
+        "tyro>=1.0.17,<1.1",
     ],
     extras_require={
         "pettingzoo": ["pettingzoo>=1.24", "gymnasium>=0.29"],
