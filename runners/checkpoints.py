@@ -28,7 +28,9 @@ best/`, each with a `<species>.msgpack` per learner and `state.json`) read as
 before and resume; the resumed run writes orbax steps beside them, and the
 old checkpoints go as the newest `keep` (and a new best) replace them.
 """
+import contextlib
 import glob
+import logging
 import os
 import shutil
 import sys
@@ -63,17 +65,32 @@ def _manager(directory: str, keep: Optional[int] = None):
   newest `keep` and the best one, or a reader when `keep` is None."""
   import orbax.checkpoint as ocp  # pylint: disable=g-import-not-at-top
   policies = ocp.checkpoint_managers
-  return ocp.CheckpointManager(
-      os.path.abspath(directory), options=ocp.CheckpointManagerOptions(
-          read_only=keep is None, create=keep is not None,
-          enable_async_checkpointing=False,
-          cleanup_tmp_directories=keep is not None,
-          best_fn=_score, best_mode='max',
-          preservation_policy=None if keep is None else
-          policies.AnyPreservationPolicy([
-              policies.LatestN(keep),
-              policies.BestN(get_metric_fn=_score, n=1,
-                             keep_checkpoints_without_metrics=False)])))
+  with _orbax_quiet():
+    return ocp.CheckpointManager(
+        os.path.abspath(directory), options=ocp.CheckpointManagerOptions(
+            read_only=keep is None, create=keep is not None,
+            enable_async_checkpointing=False,
+            cleanup_tmp_directories=keep is not None,
+            best_fn=_score, best_mode='max',
+            preservation_policy=None if keep is None else
+            policies.AnyPreservationPolicy([
+                policies.LatestN(keep),
+                policies.BestN(get_metric_fn=_score, n=1,
+                               keep_checkpoints_without_metrics=False)])))
+
+
+@contextlib.contextmanager
+def _orbax_quiet():
+  """Orbax warns (absl) when a reader opens a directory read-only and when
+  a step is saved without metrics (not a new best): both are what we ask
+  for, not news for the user's terminal."""
+  logger = logging.getLogger('absl')
+  level = logger.level
+  logger.setLevel(logging.ERROR)
+  try:
+    yield
+  finally:
+    logger.setLevel(level)
 
 
 def save(logdir: str, learners: Mapping[str, Any], state: dict[str, Any],
@@ -102,7 +119,7 @@ def save(logdir: str, learners: Mapping[str, Any], state: dict[str, Any],
   if score is not None:
     metrics = {'success': score[0], 'return': score[1]}
   iteration = int(state['iteration'])
-  with _manager(_directory(logdir), keep) as manager:
+  with _manager(_directory(logdir), keep) as manager, _orbax_quiet():
     manager.save(iteration, metrics=metrics, force=True,
                  args=ocp.args.Composite(learners=ocp.args.PyTreeSave(arrays),
                                          state=ocp.args.JsonSave(state)))
