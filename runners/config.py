@@ -45,7 +45,8 @@ class TrainArgs:
   n_agents: int = 4
   """Agents per environment (ravine: crossers; pushers are --n-pushers)."""
   agent: str = 'hrl'
-  """Variant: hrl (default), no_memory, flat or mappo."""
+  """Variant: hrl (default), no_memory, flat, mappo, or lowlevel (the lower
+  layer itself, on walk_to_target or walk_velocity: coop-pretrain-lowlevel)."""
   actors: int = 2
   """Actor processes on Ray; 0 runs the same actor and learner in this
   process without Ray (debugging, tests)."""
@@ -88,6 +89,9 @@ class TrainArgs:
   resumed run continues from its own checkpoint instead."""
   n_pushers: int = 2
   """Ravine only: number of pushers."""
+  resample_on_reach: bool = False
+  """walk_to_target only: draw a new target when one is reached (the lower
+  layer learns on fixed targets, docs/lowlevel.md)."""
   time_limit: float = 0.0
   """Episode length in seconds; 0 keeps the task's default."""
   checkpoint_every: int = 1
@@ -206,6 +210,8 @@ class TrainArgs:
       options['time_limit'] = float(self.time_limit)
     if self.task == 'ravine':
       options.update(stage=self.stage, n_pushers=self.n_pushers)
+    if self.task == 'walk_to_target':
+      options['resample_on_reach'] = self.resample_on_reach
     return options
 
   def to_dict(self) -> dict[str, Any]:

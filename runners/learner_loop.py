@@ -2,6 +2,9 @@
 
     summary = learner_loop.train(TrainArgs(task='transport', n_agents=4))
 
+The one training loop: every variant, and the lower layer's pretraining
+(`agent='lowlevel'`, which `runners.pretrain_locomotion` sets up).
+
 One iteration (version v):
   1. every species' variables (params, observation statistics) are fetched
      from its `HierarchyLearner` once and handed to the pool (Ray: one
@@ -78,13 +81,15 @@ def environment_spec(args: config_lib.TrainArgs) -> envs_lib.EnvSpec:
   """The run's environments, with its lower layer (the run's copy when
   resuming); writes nothing."""
   files = None
-  uses_commands = config_lib.hierarchy_config(args).uses_commands
+  config = config_lib.hierarchy_config(args)
+  uses_commands = config.uses_commands
   if uses_commands:
     files = envs_lib.read_controller(
         args.paradigm, _controller_copy(args) if _has_controller_copy(args)
         else args.controller)
   return envs_lib.EnvSpec(args.task, args.n_agents, args.env_options(),
-                          uses_commands, args.command_period, files)
+                          uses_commands, args.command_period, files,
+                          config.adds_locomotion_terms)
 
 
 def probe(spec: envs_lib.EnvSpec, config):

@@ -4,8 +4,7 @@ Shared by the runners so that every run directory looks the same:
 
   writer.lock                          held by the run's one writer (`RunLock`)
   metrics.csv, events.out.tfevents.*   one row per update (`MetricsLog`)
-  checkpoints/ckpt_<update>.msgpack    the learner's state (`learner.save`)
-  checkpoints/ckpt_<update>.json       the runner's counters, written last
+  checkpoints/                         `runners.checkpoints`
 
 Every write survives a kill at any instant: files and directories are
 written under a temporary name ending in `.tmp-<pid>` and renamed into
@@ -21,7 +20,6 @@ import csv
 import errno
 import fcntl
 import glob
-import json
 import math
 import os
 import re
@@ -184,44 +182,6 @@ def remove_stale(directory: str) -> None:
       recover_directory(path[:match.start()])
     else:
       _remove(path)
-
-
-# --- Checkpoints -------------------------------------------------------------
-
-
-def checkpoint_paths(logdir):
-  """[(update, msgpack path, json path)] of complete checkpoints, oldest first."""
-  out = []
-  for meta in sorted(glob.glob(os.path.join(logdir, 'checkpoints',
-                                            'ckpt_*.json'))):
-    state = meta[:-len('.json')] + '.msgpack'
-    if os.path.exists(state):
-      out.append((int(os.path.basename(meta)[5:-5]), state, meta))
-  return sorted(out)
-
-
-def save_checkpoint(learner, logdir, counters, keep):
-  """learner state + counters, each file atomic; keeps the newest `keep`."""
-  base = os.path.join(logdir, 'checkpoints', f'ckpt_{counters["update"]:08d}')
-  learner.save(base + '.msgpack')
-  tmp = f'{base}.json.tmp-{os.getpid()}'
-  with open(tmp, 'w') as f:
-    json.dump(counters, f)
-  os.replace(tmp, base + '.json')  # Written last: marks the pair complete.
-  for _, state, meta in checkpoint_paths(logdir)[:-keep]:
-    os.remove(meta)
-    os.remove(state)
-
-
-def restore_checkpoint(learner, logdir):
-  """Restores the newest checkpoint; returns its counters."""
-  paths = checkpoint_paths(logdir)
-  if not paths:
-    raise FileNotFoundError(f'No checkpoint in {logdir}/checkpoints.')
-  _, state, meta = paths[-1]
-  learner.restore(state)
-  with open(meta) as f:
-    return json.load(f)
 
 
 # --- Logging -----------------------------------------------------------------
