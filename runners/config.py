@@ -82,6 +82,9 @@ class TrainArgs:
   resumed run continues from its own checkpoint instead."""
   n_pushers: int = 2
   """Ravine only: number of pushers."""
+  resample_on_reach: bool = False
+  """walk_to_target only: draw a new target when one is reached (the lower
+  layer learns on fixed targets, docs/lowlevel.md)."""
   time_limit: float = fields.field(0.0, TIME_LIMIT)
   """Episode length in seconds; 0 keeps the task's default."""
   checkpoint_every: int = _resumable(1, fields.COUNT)
@@ -148,6 +151,8 @@ class TrainArgs:
       options['time_limit'] = float(self.time_limit)
     if self.task == 'ravine':
       options.update(stage=self.stage, n_pushers=self.n_pushers)
+    if self.task == 'walk_to_target':
+      options['resample_on_reach'] = self.resample_on_reach
     return options
 
   def to_dict(self) -> dict[str, Any]:

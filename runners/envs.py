@@ -11,6 +11,8 @@ machine) turns into environment copies:
   step) as a `FlatEnv`, whose rewards add the lower layer's locomotion terms
   (alive, up, action / energy / joint-limit costs), as the paper's
   no-hierarchy baseline is trained.
+* 'lowlevel': the bare locomotion task (walk_to_target, walk_velocity),
+  whose rewards are the lower layer's already.
 
 `species_layout` lists the species of a task (in order of first appearance)
 with the agents, observation keys and sizes that one policy per species
@@ -83,11 +85,14 @@ class EnvSpec:
   """Extra `coop_suite.load` options (time_limit, stage, n_pushers...)."""
   uses_commands: bool
   """`HierarchyConfig.uses_commands`: the policy commands the lower layer
-  (False: 'flat', which steps joints)."""
+  (False: 'flat' and 'lowlevel', which step joints)."""
   command_period: float
   controller_files: Optional[Mapping[str, bytes]] = dataclasses.field(
       default=None, repr=False)
   """From `read_controller`; unused (may be None) without commands."""
+  locomotion_terms: bool = True
+  """Without commands: add the locomotion terms (`FlatEnv`,
+  `HierarchyConfig.adds_locomotion_terms`); False steps the bare task."""
 
   def make(self, seed: int, wrap_raw: Optional[Callable[[Any], Any]] = None):
     """One copy with environment seed `seed`.
@@ -101,7 +106,7 @@ class EnvSpec:
     if wrap_raw is not None:
       env = wrap_raw(env)
     if not self.uses_commands:
-      return FlatEnv(env)
+      return FlatEnv(env) if self.locomotion_terms else env
     if self.controller_files is None:
       raise ValueError('Commands need a lower-layer controller.')
     from agents.lowlevel import wrapper  # pylint: disable=g-import-not-at-top
@@ -172,8 +177,8 @@ class Species:
     agents: indices of its agents in one environment copy.
     observation_keys: flattened keys, `HierarchyConfig.observation_prefixes`.
     observation_size: D.
-    action_size: 2 (command) or 8 (joints, 'flat').
-    action_bounds: (low, high) of the command, or None ('flat': [-1, 1]).
+    action_size: 2 (command) or 8 (joints, 'flat', 'lowlevel').
+    action_bounds: (low, high) of the command, or None (joints: [-1, 1]).
     global_state_size: S for 'mappo' (the task's global state followed by
       the agent's own observation, MAPPO's agent-specific state), else None.
   """
@@ -203,8 +208,13 @@ def species_layout(env, config) -> list[Species]:
   out = []
   for species_id, name in enumerate(names):
     agents = tuple(i for i, s in enumerate(env.task.species) if s == name)
-    keys = obs_lib.observation_keys(observation_spec[agents[0]],
-                                    config.observation_prefixes)
+    try:
+      keys = obs_lib.observation_keys(observation_spec[agents[0]],
+                                      config.observation_prefixes)
+    except ValueError as e:
+      raise ValueError(f'Agent {config.agent!r} cannot read this task: {e}'
+                       + (' It trains on walk_to_target or walk_velocity.'
+                          if config.agent == 'lowlevel' else '')) from None
     size = int(sum(obs_lib.observation_sizes(observation_spec[agents[0]],
                                              keys)))
     spec = action_spec[agents[0]]

@@ -8,8 +8,9 @@ success rate (reached within `reach_radius`), seconds to reach, final
 distance, fall rate. Velocity: `walk_velocity`: velocity cosine, relative
 speed error, speed while told to stand (transients after a redraw included),
 fall rate; then as many 5 s episodes that command zero from the start, for
-the drift of a standing ant. Means with standard errors over episodes; the
-episode seeds are `seed, seed + 1, ...`.
+the drift of a standing ant. Means with standard errors over episodes
+(`runners.evaluate.mean_and_error`, over the episodes where a figure is
+defined); the episode seeds are `seed, seed + 1, ...`.
 """
 import dataclasses
 import json
@@ -18,8 +19,7 @@ import numpy as np
 
 from agents import fields
 from runners import cli
-
-TASKS = {'position': 'walk_to_target', 'velocity': 'walk_velocity'}
+from runners.pretrain_locomotion import TASKS
 
 
 @dataclasses.dataclass(frozen=True)
@@ -42,14 +42,15 @@ class EvalArgs:
 
 
 def _mean_and_error(rows):
+  """{figure: (mean, standard error)} over the rows where it is finite
+  (NaN for none)."""
+  from runners import evaluate  # pylint: disable=g-import-not-at-top
   out = {}
   for name in rows[0]:
     values = np.array([r[name] for r in rows], np.float64)
     values = values[np.isfinite(values)]
-    mean = float(values.mean()) if len(values) else float('nan')
-    se = (float(values.std(ddof=1) / np.sqrt(len(values)))
-          if len(values) > 1 else float('nan'))
-    out[name] = (mean, se)
+    out[name] = (evaluate.mean_and_error(values) if len(values)
+                 else (float('nan'), float('nan')))
   return out
 
 

@@ -105,7 +105,8 @@ def load_model(path: str, args: EvalArgs):
         train.paradigm, args.controller or (
             copy if os.path.exists(os.path.join(copy, 'config.json')) else ''))
   spec = envs_lib.EnvSpec(train.task, train.n_agents, train.env_options(),
-                          config.uses_commands, train.command_period, files)
+                          config.uses_commands, train.command_period, files,
+                          config.adds_locomotion_terms)
   models = {}
   for saved in state['species']:
     species = envs_lib.Species(**{**saved, 'agents': tuple(saved['agents']),

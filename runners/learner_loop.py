@@ -2,6 +2,9 @@
 
     summary = learner_loop.train(TrainArgs(task='transport', n_agents=4))
 
+The one training loop: every variant, and the lower layer's pretraining
+(`agent='lowlevel'`, which `runners.pretrain_locomotion` sets up).
+
 One iteration (version v):
   1. every species' variables (params, observation statistics) are fetched
      from its `HierarchyLearner` once and handed to the pool (Ray: one
@@ -84,7 +87,8 @@ def environment_spec(args: config_lib.TrainArgs) -> envs_lib.EnvSpec:
         args.paradigm, _controller_copy(args) if _has_controller_copy(args)
         else args.controller)
   return envs_lib.EnvSpec(args.task, args.n_agents, args.env_options(),
-                          uses_commands, args.command_period, files)
+                          uses_commands, args.command_period, files,
+                          args.hierarchy.adds_locomotion_terms)
 
 
 def probe(spec: envs_lib.EnvSpec, config):

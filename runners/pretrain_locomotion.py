@@ -1,23 +1,23 @@
-"""Pretrains the lower layer (walker controller) with PPO on one Ant.
+"""Pretrains the lower layer (walker controller): `coop-pretrain-lowlevel`.
 
-    python -m runners.pretrain_locomotion --paradigm position
-    python -m runners.pretrain_locomotion --paradigm velocity --total-env-steps 8000000
-    python -m runners.pretrain_locomotion --paradigm position --resume
-    python -m runners.pretrain_locomotion --paradigm position --export-only \
+    coop-pretrain-lowlevel --paradigm position
+    coop-pretrain-lowlevel --paradigm velocity --total-env-steps 8000000
+    coop-pretrain-lowlevel --paradigm position --resume
+    coop-pretrain-lowlevel --paradigm position --export-only \
         --export-dir agents/lowlevel/weights/position
+
+A front of `coop-train`: these flags stand for a run of the 'lowlevel' agent
+on one Ant (`train_args`) with Brax's Ant PPO settings, which the one
+training loop runs (`runners.learner_loop`: the same actors, run directory,
+metrics, checkpoints and resumption as every cooperative run). At the end
+(also after Ctrl-C / SIGTERM, which stop after the current update with a
+checkpoint) the policy of the newest checkpoint is exported as a controller
+(`agents.lowlevel.save`) into `--export-dir` (default `<logdir>/controller`);
+`--export-only` exports it without training.
 
 Position paradigm: `walk_to_target` (reward 5/(1+d) to a target 2-6 m away,
 seen as a heading-frame offset); velocity paradigm: `walk_velocity` (track a
 planar velocity command). Both add the paper's alive/up/cost terms.
-
-Writes to `--logdir` (default `runs/lowlevel_<paradigm>`): `metrics.csv` and
-TensorBoard events (one row per PPO update: env steps, wall time, episode
-figures over the last 100 episodes, losses), `run_config.json`,
-`checkpoints/` (the last few, orbax steps as `coop-train` writes them;
-`--resume` continues from the newest) and, at the end, the exported
-controller in `controller/` (see `agents.lowlevel.controller`, written
-whole). Ctrl-C or SIGTERM stops after the current
-update, with a checkpoint and the export; a second one stops at once.
 
 Position-paradigm default: the target is NOT redrawn when reached
 (`resample_on_reach=False`) and episodes last 10 s. With redraws, reaching a
@@ -26,34 +26,26 @@ the return-maximising policy hovers just outside the reach radius; a fixed
 target instead teaches "walk there, then stand on it", which is what a
 position command asks of the lower layer.
 """
-import collections
 import dataclasses
+import glob
 import json
 import os
-import sys
-import time
+import re
 from typing import Any
 
-import numpy as np
-
 from agents import fields
-from runners import checkpoints
 from runners import cli
-from runners import run_dir
-from runners import vector_env
+from runners import config as config_lib
 
 TASKS = {'position': 'walk_to_target', 'velocity': 'walk_velocity'}
-LOSS_METRICS = ('total_loss', 'policy_loss', 'value_loss', 'entropy',
-                'approx_kl', 'clip_fraction', 'grad_norm')
-EPISODE_METRICS = {
-    'position': ('success', 'targets_reached', 'target_distance', 'failure',
-                 'reward/distance'),
-    'velocity': ('velocity_cosine', 'speed_error', 'mean_speed_still',
-                 'failure', 'reward/velocity'),
-}
-SUCCESS_METRIC = {'position': 'success', 'velocity': 'velocity_cosine'}
-WALKER = 'walker'
-"""The learner's name in checkpoints (`runners.checkpoints`)."""
+"""Paradigm -> the locomotion task its lower layer learns on."""
+# Brax's settings that are no flags here: a constant learning rate, raw
+# value targets, the distribution's own std floor, Brax's gradient clip.
+_FIXED = dict(agent='lowlevel', n_agents=1, keep_best=False, target_kl=0.0,
+              normalize_values=False, min_action_std=1e-3, max_grad_norm=0.5)
+# coop-train's flags in errors -> this command's.
+_FLAGS = {'--sequence-length': '--unroll-length', '--flat-sizes': '--hidden',
+          '--total-steps': '--total-env-steps', '--actors': '--num-workers'}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -63,21 +55,25 @@ class Args:
   paradigm: str = fields.field('position', fields.one_of(*TASKS))
   """'position' (walk_to_target) or 'velocity' (walk_velocity)."""
   seed: int = 0
-  """Seed of the networks, the action noise and the environments (copy i gets
-  seed + i)."""
+  """Seed of the networks, the action noise and the environments."""
   total_env_steps: int = fields.field(12_000_000, fields.COUNT)
   """Control steps over all environment copies; training stops at the first
   update that reaches it. The shipped position controller reached 100%
   success by 1M steps and was stopped at 11.3M (docs/results.md)."""
   num_envs: int = fields.field(128, fields.COUNT)
-  """Environment copies stepped per control step."""
-  num_workers: int = 2
-  """Processes stepping the copies (0: in this process)."""
+  """Environment copies, all stepped with one parameter version per
+  update."""
+  num_workers: int = fields.field(2, fields.NON_NEGATIVE)
+  """Ray actors that step the copies, num_envs / num_workers each with its
+  own copy of the policy (0: all in this process, without Ray)."""
   unroll_length: int = fields.field(32, fields.COUNT)
   """Control steps per copy in one rollout; a PPO update uses
   num_envs * unroll_length steps collected with one parameter version."""
   logdir: str = ''
   """Run directory; default runs/lowlevel_<paradigm>."""
+  ray_address: str = ''
+  """Join this Ray cluster (as coop-train --ray-address); empty starts a
+  local Ray instance."""
   checkpoint_every: int = fields.field(50, fields.COUNT)
   """Write a checkpoint every this many updates (and at the end)."""
   keep_checkpoints: int = fields.field(3, fields.COUNT)
@@ -116,236 +112,141 @@ class Args:
 
   def __post_init__(self):
     fields.check(self)
-    self.ppo_config()  # Checks the PPO fields.
     if not self.logdir:
       object.__setattr__(self, 'logdir', f'runs/lowlevel_{self.paradigm}')
     if not self.export_dir:
       object.__setattr__(self, 'export_dir',
                          os.path.join(self.logdir, 'controller'))
+    object.__setattr__(self, 'hidden', tuple(self.hidden))
+    if self.num_envs % max(1, self.num_workers):
+      raise ValueError(f'--num-envs {self.num_envs} must be divisible by '
+                       f'--num-workers {self.num_workers}.')
+    if self.num_envs % self.num_minibatches:
+      raise ValueError(f'--num-envs {self.num_envs} must be divisible by '
+                       f'--num-minibatches {self.num_minibatches}.')
+    try:
+      self.train_args()  # Checks the rest, in this command's words.
+    except ValueError as e:
+      raise ValueError(in_our_words(e)) from None
 
   def task(self) -> str:
     return TASKS[self.paradigm]
 
-  def env_options(self) -> dict[str, Any]:
-    """coop_suite.load options of the training environment."""
-    options = {}
-    if self.time_limit > 0:
-      options['time_limit'] = self.time_limit
-    elif self.paradigm == 'position':
-      options['time_limit'] = 10.0
-    if self.paradigm == 'position':
-      options['resample_on_reach'] = self.resample_on_reach
-    return options
+  def train_args(self) -> config_lib.TrainArgs:
+    """The `coop-train` run these flags stand for."""
+    return config_lib.train_args(
+        **_FIXED, task=self.task(), paradigm=self.paradigm,
+        actors=self.num_workers,
+        envs_per_actor=self.num_envs // max(1, self.num_workers),
+        total_steps=self.total_env_steps, seed=self.seed, logdir=self.logdir,
+        ray_address=self.ray_address, resume=self.resume,
+        checkpoint_every=self.checkpoint_every,
+        keep_checkpoints=self.keep_checkpoints, progress=self.progress,
+        time_limit=self.time_limit or (
+            10.0 if self.paradigm == 'position' else 0.0),
+        resample_on_reach=self.resample_on_reach,
+        sequence_length=self.unroll_length, num_epochs=self.num_epochs,
+        num_minibatches=self.num_minibatches,
+        learning_rate=self.learning_rate, entropy_cost=self.entropy_cost,
+        discount=self.discount, gae_lambda=self.gae_lambda,
+        reward_scaling=self.reward_scaling, flat_sizes=self.hidden)
 
-  def ppo_config(self):
-    from agents.ppo import config as ppo_config  # pylint: disable=g-import-not-at-top
-    return ppo_config.PPOConfig(
-        learning_rate=self.learning_rate, discount=self.discount,
-        gae_lambda=self.gae_lambda, num_epochs=self.num_epochs,
-        num_minibatches=self.num_minibatches, entropy_cost=self.entropy_cost,
-        reward_scaling=self.reward_scaling, seed=self.seed,
-        policy_hidden=self.hidden, value_hidden=self.hidden)
+
+def in_our_words(error: Exception) -> str:
+  """An error of the training loop with coop-train's flags renamed."""
+  return re.sub('|'.join(map(re.escape, _FLAGS)),
+                lambda m: _FLAGS[m.group(0)], str(error))
 
 
-def env_config(args: Args) -> dict[str, Any]:
-  """The training task's full config (defaults + overrides) as a dict."""
+def check_not_an_old_run(logdir: str) -> None:
+  """Raises ValueError for a run directory of the pretraining loop that
+  came before the one training loop (checkpoint files, not directories)."""
+  old = glob.glob(os.path.join(glob.escape(logdir), 'checkpoints',
+                               'ckpt_*.msgpack'))
+  if old or os.path.exists(os.path.join(logdir, 'run_config.json')):
+    raise ValueError(
+        f'{logdir} holds a pretraining run of an older coop-suite (its '
+        'run_config.json, checkpoints/ckpt_*.msgpack), which this version '
+        'can neither resume nor export; a controller/ it exported still '
+        'loads. Start a new run with another --logdir (docs/lowlevel.md).')
+
+
+def export(args: Args, checkpoint: str) -> dict[str, Any]:
+  """Writes the policy of a 'lowlevel' checkpoint to `args.export_dir` as a
+  controller (`agents.lowlevel.files`, written whole); returns its config."""
   import coop_suite  # pylint: disable=g-import-not-at-top
-  options = args.env_options()
-  config_cls = coop_suite.TASKS[args.task()][1]
-  return dataclasses.asdict(config_cls(**options))
-
-
-def run_config(args: Args) -> dict[str, Any]:
-  """What must match for `--resume` to continue the same run."""
-  return {'task': args.task(), 'paradigm': args.paradigm,
-          'num_envs': args.num_envs, 'unroll_length': args.unroll_length,
-          'ppo_config': dataclasses.asdict(args.ppo_config()),
-          'env_config': env_config(args)}
-
-
-def episode_summary(episodes, names):
-  """Means over the episodes in the window ([] -> NaN)."""
-  out = {'episodes': len(episodes)}
-  for name in ('return', 'length') + tuple(names):
-    values = [float(e[name]) for e in episodes if name in e]
-    out[name] = float(np.mean(values)) if values else float('nan')
-  return out
-
-
-# --- Training ----------------------------------------------------------------
-
-
-def _flat_timestep(step, n_agents):
-  """VectorStep [N, A, ...] -> the actor's [N * A, ...] timestep."""
-  return vector_env.VectorStep(
-      step_type=np.repeat(step.step_type, n_agents),
-      reward=step.reward.reshape(-1),
-      discount=np.repeat(step.discount, n_agents),
-      truncation=np.repeat(step.truncation, n_agents),
-      observation=step.observation.reshape(-1, step.observation.shape[-1]),
-      final_observation=None, episodes=step.episodes)
-
-
-def export(args, learner, envs_info, counters, summary=None):
-  """Writes the controller (policy params, normaliser, configs)."""
+  from agents import observations as obs_lib  # pylint: disable=g-import-not-at-top
   from agents.lowlevel import controller as controller_lib  # pylint: disable=g-import-not-at-top
+  from agents.ppo import config as ppo_config  # pylint: disable=g-import-not-at-top
+  from runners import checkpoints  # pylint: disable=g-import-not-at-top
+  from runners import evaluate  # pylint: disable=g-import-not-at-top
+  from runners import run_dir  # pylint: disable=g-import-not-at-top
+  spec, config, models, state = evaluate.load_model(
+      checkpoint, evaluate.EvalArgs(checkpoint=(checkpoint,)))
+  if config.agent != 'lowlevel' or TASKS[args.paradigm] != spec.task:
+    raise ValueError(f'{checkpoint} trained agent {config.agent!r} on '
+                     f'{spec.task!r}, not the {args.paradigm}-paradigm lower '
+                     f'layer (agent lowlevel on {TASKS[args.paradigm]!r}).')
+  (species, _, _, learner), = models.values()
   params, normalizer = learner.get_variables(['params', 'normalizer'])
-  config = run_config(args)
-  run_dir.write_directory(args.export_dir, controller_lib.files(
-      params['policy'], normalizer, {
-      'paradigm': args.paradigm,
-      'task': args.task(),
-      'observation_keys': list(envs_info['keys']),
-      'observation_sizes': list(envs_info['sizes']),
-      'action_size': envs_info['action_size'],
-      'ppo_config': config['ppo_config'],
-      'env_config': config['env_config'],
-      'training': {**counters, 'seed': args.seed,
-                   'final_metrics': summary or {}},
-  }))
-
-
-def _prepare_logdir(args: Args) -> bool:
-  """Checks or writes run_config.json; returns whether the run resumes."""
-  config = run_config(args)
-  config_path = os.path.join(args.logdir, 'run_config.json')
-  resuming = args.resume or args.export_only
-  if resuming:
-    with open(config_path) as f:
-      saved = json.load(f)
-    if json.loads(json.dumps(config)) != saved:
-      raise ValueError(f'{config_path} differs from these arguments; resume '
-                       'with the settings the run started with.')
-  elif os.path.exists(os.path.join(args.logdir, 'metrics.csv')):
-    raise FileExistsError(f'{args.logdir} already holds a run: pass --resume '
-                          'or choose another --logdir.')
-  else:
-    os.makedirs(args.logdir, exist_ok=True)
-    with open(config_path, 'w') as f:
-      json.dump(config, f, indent=2)
-  return resuming
+  # The 'flat' module's policy MLP is `policy_value`'s policy, by name.
+  policy = {'params': params['params']['policy']}
+  ppo = ppo_config.PPOConfig(
+      **{f.name: getattr(config, f.name)
+         for f in dataclasses.fields(ppo_config.PPOConfig)
+         if hasattr(config, f.name)},
+      policy_hidden=config.flat_sizes, value_hidden=config.flat_sizes)
+  task_config = coop_suite.TASKS[spec.task][1](**spec.options)
+  env = spec.make(0)  # The sizes of the keys the policy reads.
+  sizes = obs_lib.observation_sizes(env.observation_spec()[0],
+                                    species.observation_keys)
+  env.close()
+  iteration = state['iteration']
+  config_json = {
+      'paradigm': args.paradigm, 'task': spec.task,
+      'observation_keys': list(species.observation_keys),
+      'observation_sizes': list(sizes),
+      'action_size': species.action_size,
+      'ppo_config': dataclasses.asdict(ppo),
+      'env_config': dataclasses.asdict(task_config),
+      'agent_config': state['agent_config'],
+      'training': {
+          'update': iteration, 'env_steps': state['env_steps'],
+          'wall_time': state['wall_time'], 'seed': config.seed,
+          'checkpoint': os.path.abspath(checkpoint),
+          'final_metrics': run_dir.logged_row(
+              checkpoints.run_directory(checkpoint), iteration)}}
+  run_dir.write_directory(args.export_dir,
+                          controller_lib.files(policy, normalizer, config_json))
+  return config_json
 
 
 def train(args: Args) -> dict[str, Any]:
-  """Runs (or resumes) the pretraining; returns the last logged row.
-
-  One writer per run directory (`run_dir.RunLock`), as `coop-train`.
-  """
-  with run_dir.RunLock(args.logdir):
-    return _train(args)
-
-
-def _train(args: Args) -> dict[str, Any]:
-  from agents.ppo import builder as ppo_builder  # pylint: disable=g-import-not-at-top
-
-  resuming = _prepare_logdir(args)
-  ppo_config = args.ppo_config()
-  if args.num_envs % ppo_config.num_minibatches:
-    raise ValueError(f'--num-envs {args.num_envs} must be divisible by '
-                     f'--num-minibatches {ppo_config.num_minibatches}.')
-  builder = ppo_builder.PPOBuilder(ppo_config)
-  env_fn = vector_env.make_env_fn(args.task(), **args.env_options())
-  with vector_env.VectorEnv(env_fn, 1) as probe:  # Observation layout only.
-    info = {'keys': probe.observation_keys, 'sizes': probe.observation_sizes,
-            'action_size': int(np.prod(probe.action_shape))}
-  networks = builder.make_networks(sum(info['sizes']), info['action_size'])
-  learner = builder.make_learner(networks)
-  counters = {'update': 0, 'env_steps': 0, 'wall_time': 0.0}
-  if resuming:
-    saved = checkpoints.restore(checkpoints.resolve(args.logdir),
-                                {WALKER: learner})
-    counters = {k: saved[k] for k in counters}
-    checkpoints.discard_after(args.logdir, counters['update'])
+  """Trains (unless --export-only) and exports; returns the controller's
+  config.json contents."""
+  from runners import checkpoints  # pylint: disable=g-import-not-at-top
+  from runners import learner_loop  # pylint: disable=g-import-not-at-top
+  from runners import run_dir  # pylint: disable=g-import-not-at-top
+  check_not_an_old_run(args.logdir)
   if args.export_only:
-    export(args, learner, info, counters,
-           summary=run_dir.logged_row(args.logdir, counters['update']))
-    return counters
-
-  names = EPISODE_METRICS[args.paradigm]
-  log = run_dir.MetricsLog(
-      args.logdir, ['update', 'env_steps', 'wall_time', 'sps', 'episodes',
-                    'return', 'length', *names, *LOSS_METRICS],
-      resume_update=counters['update'] if resuming else None)
-  # A resumed run starts new episodes with new seeds (no replayed episodes).
-  envs = vector_env.VectorEnv(
-      env_fn, args.num_envs,
-      seed=args.seed + args.num_envs * counters['update'],
-      num_workers=args.num_workers)
-  actor = builder.make_actor(networks, learner, actor_id=counters['update'])
-  try:
-    with run_dir.GracefulStop() as stop:
-      row = _loop(args, envs, actor, learner, log, counters, stop)
-  finally:
-    envs.close()
-    log.close()
-  export(args, learner, info, counters, summary=row)
-  return row
-
-
-def _loop(args, envs, actor, learner, log, counters, stop):
-  """Collect a rollout, update, log, checkpoint; until done or stopped."""
-  import jax  # pylint: disable=g-import-not-at-top
-  import tqdm  # pylint: disable=g-import-not-at-top
-  names = EPISODE_METRICS[args.paradigm]
-  success = SUCCESS_METRIC[args.paradigm]
-  window = collections.deque(maxlen=100)
-  steps_per_update = args.num_envs * args.unroll_length * envs.n_agents
-  interactive = sys.stderr.isatty()
-  bar = tqdm.tqdm(total=args.total_env_steps, initial=counters['env_steps'],
-                  unit='step', unit_scale=True, dynamic_ncols=True,
-                  disable=not (args.progress and interactive))
-  last_print = time.time()
-  row = {}
-  start_wall = time.time() - counters['wall_time']
-  timestep = _flat_timestep(envs.reset(), envs.n_agents)
-  actor.observe_first(timestep)
-  with bar:
-    while (counters['env_steps'] < args.total_env_steps
-           and not stop.requested):
-      tick = time.time()
-      for _ in range(args.unroll_length):
-        action = actor.select_action(timestep.observation)
-        step = envs.step(action)
-        window.extend(step.episodes)
-        timestep = _flat_timestep(step, envs.n_agents)
-        actor.observe(action, timestep)
-      metrics = learner.step(actor.take_rollout())
-      actor.update()
-      metrics = {k: float(v) for k, v in jax.device_get(metrics).items()}
-      counters['update'] += 1
-      counters['env_steps'] += steps_per_update
-      counters['wall_time'] = time.time() - start_wall
-      summary = episode_summary(list(window), names)
-      row = {'update': counters['update'], 'env_steps': counters['env_steps'],
-             'wall_time': round(counters['wall_time'], 2),
-             'sps': round(steps_per_update / (time.time() - tick), 1),
-             **summary, **{k: metrics.get(k) for k in LOSS_METRICS}}
-      log.write(row)
-      postfix = {'return': f'{summary["return"]:.1f}',
-                 success: f'{summary[success]:.2f}',
-                 'sps': f'{row["sps"]:.0f}'}
-      bar.update(steps_per_update)
-      bar.set_postfix(postfix, refresh=False)
-      if args.progress and not interactive and time.time() - last_print > 30:
-        last_print = time.time()
-        print(f'update {counters["update"]} env_steps {counters["env_steps"]}'
-              f' wall {counters["wall_time"]:.0f}s '
-              + ' '.join(f'{k} {v}' for k, v in postfix.items()), flush=True)
-      if (counters['update'] % args.checkpoint_every == 0 or stop.requested
-          or counters['env_steps'] >= args.total_env_steps):
-        checkpoints.save(args.logdir, {WALKER: learner},
-                         {'iteration': counters['update'], **counters},
-                         args.keep_checkpoints)
-  return row
+    checkpoint = checkpoints.resolve(args.logdir)
+  else:
+    checkpoint = learner_loop.train(args.train_args())['checkpoint']
+  with run_dir.RunLock(args.logdir):  # The run's one writer, as training.
+    return export(args, checkpoint)
 
 
 def main(argv=None):
   args = cli.parse(Args, argv, description=__doc__.splitlines()[0])
   try:
-    row = train(args)
+    exported = train(args)
   except cli.user_errors() as e:
+    e.args = (in_our_words(e),)
     cli.fail('coop-pretrain-lowlevel', e)
-  print(json.dumps({k: row.get(k) for k in ('update', 'env_steps', 'return')}))
+  training = exported['training']
+  print(json.dumps({'update': training['update'],
+                    'env_steps': training['env_steps'],
+                    'return': training['final_metrics'].get('return')}))
   print(f'controller: {args.export_dir}')
 
 

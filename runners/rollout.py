@@ -103,7 +103,7 @@ class EnvBatch:
         [np.repeat(state, len(species.agents), axis=0), observation], -1)
 
   def step(self, actions: dict[str, np.ndarray]):
-    """Steps every copy by one command (or control step, 'flat').
+    """Steps every copy by one command (or control step, joint actions).
 
     Args:
       actions: {species: [B_s, A]}.

@@ -1,4 +1,4 @@
-"""The lower layer: vector env, pretraining CLI, controller, CommandWrapper.
+"""The lower layer: pretraining CLI, controller, CommandWrapper.
 
 Everything runs on tiny budgets: a 2-update pretraining run with 16-unit
 networks supplies the controller that the other tests load.
@@ -17,16 +17,22 @@ import coop_suite
 from agents import lowlevel
 from agents import observations as obs_lib
 from agents.lowlevel import controller as controller_lib
+from runners import checkpoints
+from runners import cli
+from runners import config as config_lib
+from runners import evaluate
 from runners import pretrain_locomotion
 from runners import run_dir
-from runners import vector_env
 
+# Ray starts processes with fork + exec, which JAX's fork warning cannot
+# tell from a bare fork.
+pytestmark = pytest.mark.filterwarnings('ignore:os.fork:RuntimeWarning')
 TINY = ['--num-envs', '8', '--unroll-length', '8', '--num-workers', '0',
         '--hidden', '16', '--num-minibatches', '2', '--checkpoint-every', '1',
         '--no-progress']
 
 
-# --- Observations and vector env ---------------------------------------------
+# --- Observations ---------------------------------------------------------------
 
 
 def test_flatten_key_order_and_shapes():
@@ -45,79 +51,30 @@ def test_flatten_key_order_and_shapes():
     obs_lib.observation_keys({'proprio/a': 0})
 
 
-def test_vector_env_seeding_and_auto_reset():
-  # 0.25 s episodes: 5 control steps, then a time-limit end.
-  make = vector_env.make_env_fn('walk_to_target', time_limit=0.25)
-  actions = np.random.default_rng(0).uniform(-1, 1, (7, 3, 1, 8))
-  runs = {}
-  for workers in (0, 2):
-    with vector_env.VectorEnv(make, 3, seed=5, num_workers=workers) as envs:
-      first = envs.reset()
-      steps = [envs.step(a) for a in actions]
-    runs[workers] = (first, steps)
-    assert first.observation.shape == (3, 1, 36)
-    assert (first.step_type == vector_env.FIRST).all()
-    # Copies differ (seeds 5, 6, 7); copy 0 is `load(seed=5)`'s episode.
-    assert not np.allclose(first.observation[0], first.observation[1])
-    alone = coop_suite.load('walk_to_target', 1, seed=5, time_limit=0.25)
-    np.testing.assert_allclose(
-        first.observation[0, 0],
-        obs_lib.flatten(alone.reset().observation[0], envs.observation_keys),
-        rtol=1e-6)
-    last = steps[4]
-    assert (last.step_type == vector_env.LAST).all()
-    assert last.truncation.all() and (last.discount == 1).all()
-    assert sorted(e['env'] for e in last.episodes) == [0, 1, 2]
-    assert all(e['length'] == 5 and e['truncated'] for e in last.episodes)
-    assert 'target_distance' in last.episodes[0]
-    # The next episode's first observation, the old one's last kept apart.
-    assert not np.allclose(last.observation, last.final_observation)
-    assert (steps[5].step_type == vector_env.MID).all()
-    assert not any(s.episodes for s in steps[:4] + steps[5:])
-  for a, b in zip(runs[0][1], runs[2][1]):  # Workers change nothing.
-    np.testing.assert_array_equal(a.observation, b.observation)
-    np.testing.assert_array_equal(a.reward, b.reward)
-
-
-def test_vector_env_reports_a_fall_as_termination():
-  # Nothing stands above 10 m: the Ant counts as fallen at once.
-  make = vector_env.make_env_fn('walk_to_target', fall_height=10.0)
-  with vector_env.VectorEnv(make, 2, num_workers=0) as envs:
-    envs.reset()
-    step = envs.step(np.zeros((2, 1, 8)))
-  assert (step.step_type == vector_env.LAST).all()
-  assert (step.discount == 0).all() and not step.truncation.any()
-  assert all(e['failure'] and not e['truncated'] for e in step.episodes)
-
-
-def test_vector_env_worker_errors_surface():
-  with pytest.raises(RuntimeError, match='worker failed'):
-    vector_env.VectorEnv(vector_env.make_env_fn('no_such_task'), 2,
-                         num_workers=1)
-
-
-# --- Pretraining CLI ------------------------------------------------------------
+# --- Pretraining: the one training loop, then a controller ------------------
 
 
 @pytest.fixture(scope='module')
 def tiny_run(tmp_path_factory):
-  """A 2-update position run (8 envs x 8 steps), then --resume to 3."""
+  """A 2-update position run (8 envs x 8 steps) in process, then --resume
+  to 3 with the copies in one Ray actor."""
   logdir = str(tmp_path_factory.mktemp('pretrain') / 'run')
   argv = ['--paradigm', 'position', '--logdir', logdir, *TINY]
   pretrain_locomotion.main(argv + ['--total-env-steps', '128'])
   with open(os.path.join(logdir, 'metrics.csv')) as f:
     first_rows = list(csv.DictReader(f))
   checkpoints_before = sorted(os.listdir(os.path.join(logdir, 'checkpoints')))
-  pretrain_locomotion.main(argv + ['--total-env-steps', '192', '--resume'])
+  pretrain_locomotion.main(argv + ['--total-env-steps', '192', '--resume',
+                                   '--num-workers', '1'])
   return logdir, first_rows, checkpoints_before
 
 
-def test_pretrain_writes_metrics_checkpoints_and_resumes(tiny_run, capsys):
+def test_pretrain_is_a_lowlevel_run_of_the_training_loop(tiny_run):
   logdir, first_rows, checkpoints_before = tiny_run
   assert [int(r['env_steps']) for r in first_rows] == [64, 128]
   assert checkpoints_before == ['1', '2']
   for row in first_rows:
-    assert np.isfinite(float(row['total_loss']))
+    assert np.isfinite(float(row['learner/ant/total_loss']))
     assert float(row['wall_time']) > 0
   with open(os.path.join(logdir, 'metrics.csv')) as f:
     rows = list(csv.DictReader(f))
@@ -126,14 +83,41 @@ def test_pretrain_writes_metrics_checkpoints_and_resumes(tiny_run, capsys):
   # The last three are kept.
   assert sorted(os.listdir(os.path.join(logdir, 'checkpoints'))) == [
       '1', '2', '3']
+  assert any(n.startswith('events.out.tfevents') for n in os.listdir(logdir))
+  # The run is coop-train's, with the Brax-like settings of the flags.
+  state = checkpoints.read_state(checkpoints.resolve(logdir))
+  assert state['agent_config']['agent'] == 'lowlevel'
+  assert state['args']['actors'] == 1  # The resumed update's Ray actor.
+  assert state['args']['task'] == 'walk_to_target'
+  assert state['args']['time_limit'] == 10.0
+  assert state['agent_config']['target_kl'] == 0.0
+  assert state['agent_config']['state_dependent_std'] is True
+  assert state['species'][0]['observation_keys'] == list(
+      lowlevel.load('position').observation_keys)
+  # The export: the shipped format, from the final checkpoint.
   with open(os.path.join(logdir, 'controller', 'config.json')) as f:
     config = json.load(f)
+  assert config['training']['update'] == 3
   assert config['training']['env_steps'] == 192
   assert config['env_config']['resample_on_reach'] is False
-  assert any(n.startswith('events.out.tfevents') for n in os.listdir(logdir))
+  assert config['env_config']['time_limit'] == 10.0
+  assert config['ppo_config']['discount'] == 0.97
+  assert config['ppo_config']['policy_hidden'] == [16]
+
+
+def test_pretrain_refuses_what_it_cannot_continue(tiny_run, tmp_path,
+                                                  capsys):
+  logdir = tiny_run[0]
   argv = ['--paradigm', 'position', '--logdir', logdir, *TINY]
+  old = tmp_path / 'old'  # A run directory of the loop before this one.
+  os.makedirs(old / 'checkpoints')
+  (old / 'run_config.json').write_text('{}')
+  (old / 'checkpoints' / 'ckpt_00000001.msgpack').write_bytes(b'')
   cases = [(['--total-env-steps', '64'], '--resume'),
-           (['--resume', '--learning-rate', '1e-3'], 'differs')]
+           (['--resume', '--learning-rate', '1e-3'], '--learning-rate'),
+           (['--resume', '--unroll-length', '4'], '--unroll-length'),
+           (['--resume', '--logdir', str(old)], 'older coop-suite'),
+           (['--export-only', '--logdir', str(old)], 'older coop-suite')]
   for more, match in cases:
     with pytest.raises(SystemExit) as exit_info:
       pretrain_locomotion.main(argv + more)
@@ -146,23 +130,60 @@ def test_pretrain_writes_metrics_checkpoints_and_resumes(tiny_run, capsys):
   assert 'being written by another run' in capsys.readouterr().err
 
 
-def test_export_only_writes_the_newest_checkpoint_with_its_metrics(
-    tiny_run, tmp_path):
+def test_export_only_writes_the_newest_checkpoints_policy(tiny_run,
+                                                            tmp_path):
   logdir = tiny_run[0]
   pretrain_locomotion.main(['--paradigm', 'position', '--logdir', logdir,
-                            *TINY, '--total-env-steps', '192', '--export-only',
-                            '--export-dir', str(tmp_path)])
+                            '--export-only', '--export-dir', str(tmp_path)])
   with open(tmp_path / 'config.json') as f:
     training = json.load(f)['training']
   assert training['update'] == 3 and training['env_steps'] == 192
   assert training['final_metrics']['env_steps'] == 192
-  assert np.isfinite(training['final_metrics']['total_loss'])
+  assert np.isfinite(training['final_metrics']['learner/ant/total_loss'])
   exported = lowlevel.load('position', str(tmp_path))
-  shipped_next = lowlevel.load('position', os.path.join(logdir, 'controller'))
+  # The controller acts as the checkpoint's policy does (its mean).
+  spec, config, models, _ = evaluate.load_model(
+      logdir, evaluate.EvalArgs(checkpoint=(logdir,)))
+  _, builder, networks, learner = models['ant']
+  actor = builder.make_actor(networks, learner, deterministic=True)
   observation = coop_suite.load('walk_to_target', 1, seed=0).reset(
       ).observation[0]
-  np.testing.assert_allclose(exported(observation), shipped_next(observation),
-                             rtol=1e-5, atol=1e-6)
+  flat = obs_lib.flatten(observation, exported.observation_keys)[None]
+  np.testing.assert_allclose(
+      exported(observation), actor.select_action(flat, np.ones(1, bool))[0][0],
+      rtol=1e-5, atol=1e-6)
+  assert config.agent == 'lowlevel' and spec.task == 'walk_to_target'
+  with pytest.raises(ValueError, match='velocity-paradigm'):
+    pretrain_locomotion.export(pretrain_locomotion.Args(
+        paradigm='velocity', export_dir=str(tmp_path)),
+                               checkpoints.resolve(logdir))
+
+
+def test_the_lowlevel_agent_reads_only_locomotion_tasks():
+  from agents.hierarchy import config as hierarchy_config  # pylint: disable=g-import-not-at-top
+  from runners import envs as envs_lib  # pylint: disable=g-import-not-at-top
+  with pytest.raises(ValueError, match='walk_to_target or walk_velocity'):
+    envs_lib.species_layout(coop_suite.load('transport', 2),
+                            hierarchy_config.HierarchyConfig(agent='lowlevel'))
+
+
+def test_the_documented_commands_parse():
+  """Every coop-pretrain-lowlevel command of docs/lowlevel.md is valid."""
+  doc = os.path.join(os.path.dirname(__file__), '..', 'docs', 'lowlevel.md')
+  with open(doc) as f:
+    text = f.read().replace('\\\n', ' ')
+  commands = [line.split('#')[0].split()[1:] for line in text.splitlines()
+              if line.startswith('coop-pretrain-lowlevel ')]
+  assert len(commands) >= 4
+  for argv in commands:
+    args = cli.parse(pretrain_locomotion.Args, argv)
+    assert args.train_args().agent == 'lowlevel'
+  # The coop-train run that the defaults stand for, as the page says.
+  argv, = [line.split()[1:] for line in text.splitlines()
+           if line.startswith('coop-train --task walk_to_target')]
+  documented = cli.parse(config_lib.TrainArgs, argv + ['--logdir', 'x'])
+  expected = pretrain_locomotion.Args(logdir='x').train_args()
+  assert documented == expected
 
 
 # --- Controller -------------------------------------------------------------------

@@ -6,6 +6,8 @@ a GRU) turns a sequence of features into commands for the frozen lower layer
 package trains UL + ML with the recurrent PPO learner of `agents.ppo`; the
 ablations of the paper are selected by `HierarchyConfig.agent` and read
 through its properties (`recurrent`, `uses_commands`, `uses_global_state`).
+The variant 'lowlevel' is the lower layer itself, on a locomotion task: its
+trained policy is exported as a controller (`coop-pretrain-lowlevel`).
 
 config.py    HierarchyConfig: agent variant and hyper-parameters.
 modules.py   Flax modules: upper layer, resetting GRU middle layer, heads,

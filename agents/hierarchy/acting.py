@@ -11,9 +11,9 @@ and every `HierarchyConfig.sequence_length` commands hands
 `actor.take_rollout()` (a `SequenceBatch`) to the learner. `reset` is true
 where `observation` is the first of an episode: the row's carry is replaced
 by the initial one before acting. Timesteps are dm_env-style at the command
-rate with a leading batch axis and auto-reset, as in `agents.ppo.acting`:
-where `step_type` is LAST, `observation` already starts the next episode
-(`reset_from_step_type` turns step types into resets).
+rate with a leading batch axis and auto-reset: where `step_type` is LAST,
+`observation` already starts the next episode (`reset_from_step_type` turns
+step types into resets).
 
 The actor records what it acted on (observations, resets, global states,
 the carry before the segment's first command), so the learner replays

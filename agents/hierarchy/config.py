@@ -6,13 +6,15 @@ critic of its own, KL-adaptive learning rate, std floor, discount per
 command) are explained in docs/training.md, "Stability"; the others follow
 PureJaxRL's `ppo_rnn` and the project's PPO (`agents.ppo.config`). One
 config describes one species; the runner makes a learner and actor per
-species.
+species. The variant 'lowlevel' is the lower layer itself, trained on a
+locomotion task (`coop-pretrain-lowlevel` sets its Brax-like settings).
 """
 import dataclasses
 
 from agents import fields
+from agents import observations as obs_lib
 
-AGENTS = ('hrl', 'no_memory', 'flat', 'mappo')
+AGENTS = ('hrl', 'no_memory', 'flat', 'mappo', 'lowlevel')
 CRITICS = ('separate', 'stop_gradient', 'shared')
 
 
@@ -24,7 +26,11 @@ class HierarchyConfig:
   """Variant (paper section 6 ablations): 'hrl' = UL MLP + ML GRU (default);
   'no_memory' = an MLP in place of the GRU (Nachum et al. 2019); 'flat' = one
   MLP from proprio + extero to the joint actions, no lower layer; 'mappo' =
-  'hrl' whose critic also reads the global state (centralised critic)."""
+  'hrl' whose critic also reads the global state (centralised critic);
+  'lowlevel' = the lower layer: the 'flat' networks from proprio + command
+  to the joint actions, on a locomotion task (walk_to_target,
+  walk_velocity) with its own rewards, exported as a controller
+  (`agents.lowlevel`)."""
   critic: str = fields.field('separate', fields.one_of(*CRITICS))
   """How the critic relates to the policy's upper and middle layers, the same
   for 'hrl', 'no_memory' and 'mappo' ('flat' always has its own value MLP):
@@ -120,15 +126,16 @@ class HierarchyConfig:
   """'mappo': widths of the MLP over the global state whose features join
   the critic's middle-layer features before the value head."""
   flat_sizes: tuple[int, ...] = fields.field((256, 256), fields.COUNT)
-  """'flat': hidden widths of its policy MLP and its separate value MLP (the
-  lower layer's own architecture, `agents.ppo` defaults)."""
+  """'flat', 'lowlevel': hidden widths of the policy MLP and its separate
+  value MLP (the lower layer's own architecture)."""
   activation: str = 'swish'
   """Hidden activation of all MLPs, by name (see `agents.networks.mlp`)."""
   state_dependent_std: bool = False
   """False: the action std is a learned parameter vector, the same for every
   state (PureJaxRL); exploration then cannot collapse in some states while
   the value is still poor. True: the head outputs it (Brax). Both start at
-  softplus(0) + 1e-3 ~= 0.69 in pre-tanh units."""
+  softplus(0) + 1e-3 ~= 0.69 in pre-tanh units. Always True for 'lowlevel':
+  a controller's policy outputs its std (`agents.networks.policy_value`)."""
 
   @property
   def recurrent(self) -> bool:
@@ -138,8 +145,15 @@ class HierarchyConfig:
   @property
   def uses_commands(self) -> bool:
     """Whether the policy commands the frozen lower layer (every variant but
-    'flat', which emits joint actions every control step)."""
-    return self.agent != 'flat'
+    'flat' and 'lowlevel', which emit joint actions every control step)."""
+    return self.agent not in ('flat', 'lowlevel')
+
+  @property
+  def adds_locomotion_terms(self) -> bool:
+    """Whether the task's reward gets the lower layer's locomotion terms
+    added ('flat'; a locomotion task, which 'lowlevel' trains on, has
+    them already)."""
+    return self.agent == 'flat'
 
   @property
   def uses_global_state(self) -> bool:
@@ -150,7 +164,10 @@ class HierarchyConfig:
   def observation_prefixes(self) -> tuple[str, ...]:
     """Observation groups the networks read, in flattening order (see
     `agents.observations.flatten`): exteroception for the upper layer;
-    without the lower layer ('flat') also proprioception."""
+    without the lower layer ('flat') also proprioception; the lower layer
+    itself ('lowlevel') proprioception and its command."""
+    if self.agent == 'lowlevel':
+      return obs_lib.LOWER_LAYER_PREFIXES
     return ('extero',) if self.uses_commands else ('proprio', 'extero')
 
   @property
@@ -162,6 +179,8 @@ class HierarchyConfig:
     return self.middle_layer_size * (2 if separate_critic else 1)
 
   def __post_init__(self):
+    if self.agent == 'lowlevel':  # The controller's format (see the field).
+      object.__setattr__(self, 'state_dependent_std', True)
     # Lists from a CLI or JSON become tuples, keeping the config hashable.
     for name in ('upper_layer_sizes', 'head_sizes', 'critic_sizes',
                  'flat_sizes'):

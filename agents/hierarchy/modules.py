@@ -71,9 +71,9 @@ class HierarchyPolicyValue(nn.Module):
   ('separate'; its ML state is the second half of the carry), the policy's
   ML features through a stop-gradient ('stop_gradient') or the policy's ML
   features ('shared'). 'mappo' adds features of the global state to the
-  critic's. 'flat': observation (proprio + extero) -> policy MLP and a
-  separate value MLP (Brax's layout for the lower layer); the carry passes
-  through.
+  critic's. 'flat': observation (proprio + extero; 'lowlevel': proprio +
+  command) -> policy MLP and a separate value MLP (Brax's layout for the
+  lower layer); the carry passes through.
 
   The policy's parameter names are those of every earlier layout, so older
   checkpoints' policies load into any critic structure.

@@ -41,10 +41,11 @@ class HierarchyNetworks:
     distribution: reads `dist_params` (sample, log_prob, entropy).
     agent: the `HierarchyConfig.agent` variant.
     observation_size: D.
-    action_size: A (2 for a command, 8 joint actions for 'flat').
+    action_size: A (2 for a command, 8 joint actions for 'flat' and
+      'lowlevel').
     carry_size: C = H, or 2H with a separate critic (the policy's middle
-      layer state, then the critic's); carried but unused by 'no_memory'
-      and 'flat'.
+      layer state, then the critic's); carried but unused by 'no_memory',
+      'flat' and 'lowlevel'.
     global_state_size: S for 'mappo', else None (global state is ignored).
   """
   init: Callable[[jax.Array], Params]
@@ -70,8 +71,9 @@ def make_hierarchy_networks(
   Args:
     config: agent variant and network sizes.
     obs_dim: D, width of the flattened observation ('flat': proprio +
-      extero, otherwise extero only; proprioception is the lower layer's).
-    action_dim: A, 2 for the command, the joint count for 'flat'.
+      extero; 'lowlevel': proprio + command; otherwise extero only).
+    action_dim: A, 2 for the command, the joint count for 'flat' and
+      'lowlevel'.
     global_state_dim: S, required by 'mappo', ignored by the others.
   """
   if config.uses_global_state:

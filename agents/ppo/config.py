@@ -1,11 +1,13 @@
-"""PPO hyper-parameters of the lower layer's pretraining, one frozen
-dataclass passed whole.
+"""PPO hyper-parameters of a feed-forward policy, one frozen dataclass
+passed whole.
 
-Defaults follow Brax's and CleanRL's continuous-control PPO. The upper and
-middle layer's config (`agents.hierarchy.config.HierarchyConfig`) has the
-same optimisation and objective fields, so one learner
-(`agents.ppo.learning`) reads either. Each field declares its allowed
-values (`agents.fields`).
+A controller's config.json records the lower layer's settings and network
+sizes as a PPOConfig (`agents.lowlevel.controller` rebuilds its policy from
+it); the lower layer trains as the 'lowlevel' variant of
+`agents.hierarchy.config.HierarchyConfig`, which has the same optimisation
+and objective fields, so one learner (`agents.ppo.learning`) reads either.
+Defaults follow Brax's and CleanRL's continuous-control PPO. Each field
+declares its allowed values (`agents.fields`).
 """
 import dataclasses
 

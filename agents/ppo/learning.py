@@ -1,9 +1,10 @@
 """The PPO learner: recurrent PPO over stored sequences (truncated BPTT).
 
-One learner for every network: the hierarchy's upper and middle layer
-(`agents.hierarchy.networks`, a GRU or none) and the lower layer's
-feed-forward policy (`agents.networks.policy_value`), which is a recurrent
-network without memory (carry width 0). `make_update_fn` returns the pure
+One learner for every network: the hierarchy's variants
+(`agents.hierarchy.networks`: upper and middle layer with a GRU or none, or
+the 'flat' and 'lowlevel' joint policies) and plain feed-forward networks
+(`agents.networks.policy_value`, a recurrent network without memory, carry
+width 0). `make_update_fn` returns the pure
 `update(state, batch) -> (state, metrics)`: statistics, one replay of every
 sequence for values and GAE (`agents.ppo.returns`, value normalisation),
 then epochs x minibatches of SGD where each minibatch re-unrolls the network

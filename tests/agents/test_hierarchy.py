@@ -21,7 +21,8 @@ SMALL = dict(upper_layer_sizes=(16,), middle_layer_size=H, head_sizes=(8,),
 
 
 def _action_dim(agent):
-  return 8 if agent == 'flat' else 2  # Joint actions or the 2-D command.
+  # Joint actions or the 2-D command.
+  return 8 if agent in ('flat', 'lowlevel') else 2
 
 
 @functools.lru_cache(maxsize=None)

@@ -1,5 +1,5 @@
 """PPOLearner on feed-forward networks: one update, checkpoints, and a bandit
-it must solve."""
+the lower layer's variant must solve."""
 import collections
 
 from flax import serialization
@@ -8,8 +8,11 @@ import numpy as np
 import pytest
 
 from agents import checkpointing
-from agents.ppo import builder as ppo_builder
+from agents.hierarchy import builder as hierarchy_builder
+from agents.hierarchy import config as hierarchy_config
+from agents.networks import policy_value
 from agents.ppo import config as ppo_config
+from agents.ppo import learning
 from agents.ppo import types
 
 OBS_DIM, ACTION_DIM, T, B = 3, 2, 5, 8
@@ -29,10 +32,10 @@ def _random_rollout(seed=0, with_truncation=True):
 
 
 def _make_learner(seed=0, rollouts=None, **overrides):
-  builder = ppo_builder.PPOBuilder(
-      ppo_config.PPOConfig(seed=seed, **{**SMALL, **overrides}))
-  networks = builder.make_networks(OBS_DIM, ACTION_DIM)
-  return builder.make_learner(networks, rollouts)
+  config = ppo_config.PPOConfig(seed=seed, **{**SMALL, **overrides})
+  networks = policy_value.make_policy_value_networks(
+      OBS_DIM, ACTION_DIM, config.policy_hidden, config.value_hidden)
+  return learning.PPOLearner(networks, config, rollouts)
 
 
 def test_one_update_is_finite_and_changes_parameters():
@@ -101,30 +104,37 @@ TimeStep = collections.namedtuple(
     'TimeStep', ['step_type', 'reward', 'discount', 'observation'])
 
 
-def test_ppo_solves_a_one_step_bandit():
+def test_the_lower_layer_variant_solves_a_one_step_bandit():
   # Constant observation, reward -|a - 0.5|: the policy's mean must move from
   # tanh(~0) = 0 to about 0.5. Each episode is one step and terminates.
+  # The lower layer's settings (coop-pretrain-lowlevel): constant rate, raw
+  # value targets, the distribution's own std floor.
   num_envs = 64
-  config = ppo_config.PPOConfig(
-      learning_rate=3e-3, entropy_cost=1e-3, num_epochs=2, num_minibatches=2,
-      policy_hidden=(8,), value_hidden=(8,))
-  builder = ppo_builder.PPOBuilder(config)
+  config = hierarchy_config.HierarchyConfig(
+      agent='lowlevel', learning_rate=3e-3, entropy_cost=1e-3, num_epochs=2,
+      num_minibatches=2, flat_sizes=(8,), target_kl=0.0,
+      normalize_values=False, reward_scaling=1.0, min_action_std=1e-3,
+      max_grad_norm=0.5)
+  builder = hierarchy_builder.HierarchyBuilder(config)
   networks = builder.make_networks(1, 1)
   learner = builder.make_learner(networks)
   actor = builder.make_actor(networks, learner)
   evaluator = builder.make_actor(networks, learner, deterministic=True)
   observation = np.ones((num_envs, 1), np.float32)
+  first = np.ones(num_envs, bool)  # Every step starts an episode.
   last = TimeStep(np.full(num_envs, 2), None, np.zeros(num_envs), observation)
+  mean = lambda: float(evaluator.select_action(observation[:1],
+                                               first[:1])[0][0, 0])
 
-  initial_mean = float(evaluator.select_action(observation[:1])[0, 0])
-  actor.observe_first(last)
+  initial_mean = mean()
+  actor.observe_first()
   for _ in range(60):
-    action = actor.select_action(observation)
+    action, _ = actor.select_action(observation, first)
     actor.observe(action, last._replace(reward=-np.abs(action[:, 0] - 0.5)))
     learner.step(actor.take_rollout())
     actor.update()
   evaluator.update()
-  final_mean = float(evaluator.select_action(observation[:1])[0, 0])
+  final_mean = mean()
 
   assert abs(initial_mean) < 0.1
   assert abs(final_mean - 0.5) < 0.05, final_mean

@@ -16,8 +16,9 @@ import pytest
 
 from agents.hierarchy import builder as hierarchy_builder
 from agents.hierarchy import config as hierarchy_config
-from agents.ppo import builder as ppo_builder
+from agents.networks import policy_value
 from agents.ppo import config as ppo_config
+from agents.ppo import learning
 from agents.ppo import types
 
 _DATA = os.path.join(os.path.dirname(__file__), '..', 'data',
@@ -86,9 +87,13 @@ def _compare(case, outputs):
 
 
 def test_the_feed_forward_update_is_unchanged():
-  builder = ppo_builder.PPOBuilder(ppo_config.PPOConfig(
-      seed=3, policy_hidden=(16,), value_hidden=(16,), num_minibatches=4))
-  learner = builder.make_learner(builder.make_networks(3, 2))
+  config = ppo_config.PPOConfig(
+      seed=3, policy_hidden=(16,), value_hidden=(16,), num_minibatches=4)
+  # The key the feed-forward builder gave its learner.
+  key = jax.random.split(jax.random.PRNGKey(config.seed))[0]
+  learner = learning.PPOLearner(
+      policy_value.make_policy_value_networks(3, 2, (16,), (16,)), config,
+      key=key)
   for seed in range(2):
     metrics = learner.step(_feed_forward_batch(seed))
   _compare('ppo', _outputs('ppo', learner, jax.device_get(metrics)))
