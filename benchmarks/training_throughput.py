@@ -58,10 +58,11 @@ class _Controls:
     self.start = mujoco.MjData(self.physics.model.ptr)
     self.controls = []
     step = env.step
+    data = self.physics.data.ptr  # MuJoCo's own: dm_control's view costs.
 
     def recording(action, observe=True):
       timestep = step(action, observe)
-      self.controls.append(self.physics.data.ctrl.copy())
+      self.controls.append(data.ctrl.copy())
       return timestep
     env.step = recording
     self.begin()
