@@ -117,15 +117,15 @@ def train(args: config_lib.TrainArgs,
   """
   # One writer per run directory, from the check that it is free to the end.
   with run_dir.RunLock(args.logdir):
-    checkpoint = check_run_directory(args)
-    print(f'Writing to {os.path.abspath(args.logdir)}'
-          + (f', resuming from {checkpoint}' if checkpoint else ''),
-          flush=True)
-    # Ray first: its processes are then not started from a process where
-    # JAX already runs threads.
+    # Ray first, before the checkpoints are read (orbax starts JAX): its
+    # processes are then not started from a process where JAX runs threads.
     owns_ray = args.actors > 0 and actor_pool.init_ray(
         args.ray_address, num_cpus=max(os.cpu_count(), args.actors))
     try:
+      checkpoint = check_run_directory(args)
+      print(f'Writing to {os.path.abspath(args.logdir)}'
+            + (f', resuming from {checkpoint}' if checkpoint else ''),
+            flush=True)
       return _train(args, checkpoint, on_iteration)
     finally:
       if owns_ray:

@@ -346,11 +346,22 @@ def run_plan(args: PaperArgs, plan=None,
                      'own --results and --runs (e.g. /tmp/paper/results '
                      f'/tmp/paper/runs), not {default.results} or '
                      f'{default.runs}.')
-  for cell in selected(args, plan):
-    stopped = run_cell(cell, args, log)
-    if stopped:
-      return stopped
-  return None
+  cells = selected(args, plan)
+  # Ray before anything reads a checkpoint: orbax starts JAX, and Ray's
+  # processes are not to be started from a process where JAX runs threads.
+  from runners import actor_pool  # pylint: disable=g-import-not-at-top
+  owns_ray = args.actors > 0 and actor_pool.init_ray(
+      args.ray_address, num_cpus=max(os.cpu_count(), args.actors))
+  try:
+    for cell in cells:
+      stopped = run_cell(cell, args, log)
+      if stopped:
+        return stopped
+    return None
+  finally:
+    if owns_ray:
+      import ray  # pylint: disable=g-import-not-at-top
+      ray.shutdown()
 
 
 def main(argv=None):
