@@ -2,5 +2,5 @@
 
 mlp.py            Flax MLP torso.
 distributions.py  tanh-squashed diagonal Gaussian, pure functions of its params.
-policy_value.py   feed-forward policy and value networks + inference function.
+policy_value.py   feed-forward policy and value networks.
 """

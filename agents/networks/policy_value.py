@@ -23,8 +23,6 @@ from agents.networks import distributions
 from agents.networks import mlp
 
 Params = Any  # A pytree: {'policy': ..., 'value': ...} of Flax variables.
-InferenceFn = Callable[[Params, jax.Array, jax.Array, bool],
-                       tuple[jax.Array, dict[str, jax.Array]]]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -97,39 +95,3 @@ def make_policy_value_networks(
       unroll=unroll, distribution=distribution, observation_size=obs_dim,
       action_size=action_dim)
 
-
-def make_inference_fn(
-    networks: PolicyValueNetworks,
-    action_bounds: Optional[tuple[Any, Any]] = None,
-) -> InferenceFn:
-  """Builds `fn(params, obs, key, deterministic) -> (action, extras)`.
-
-  Args:
-    networks: the policy/value networks.
-    action_bounds: optional (low, high) of a Box action spec ([A] or scalars);
-      actions are rescaled from [-1, 1] onto it. None keeps [-1, 1].
-
-  The returned function maps obs [..., obs_dim] to action [..., A] and extras
-  `{'raw_action' [..., A] (pre-tanh, what the learner needs), 'log_prob' [...],
-  'value' [...]}`. `deterministic` (a Python bool, static under jit) acts with
-  the Gaussian's mean; `key` is then unused.
-  """
-  distribution = networks.distribution
-
-  def inference(params, obs, key, deterministic=False):
-    dist_params = networks.apply_policy(params, obs)
-    if deterministic:
-      raw_action = distribution.mode_raw(dist_params)
-    else:
-      raw_action = distribution.sample_raw(dist_params, key)
-    action = distribution.squash(raw_action)
-    if action_bounds is not None:
-      action = distributions.rescale(action, *action_bounds)
-    extras = {
-        'raw_action': raw_action,
-        'log_prob': distribution.log_prob(dist_params, raw_action),
-        'value': networks.apply_value(params, obs),
-    }
-    return action, extras
-
-  return inference
