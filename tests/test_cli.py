@@ -22,10 +22,9 @@ from runners import train
 from runners import video
 
 _ROOT = os.path.join(os.path.dirname(__file__), '..')
-# A run stored before the agent's config was nested (flat TrainArgs); the
-# paper's next session resumes it.
-_OLD_RUN = os.path.join(_ROOT, 'results', 'paper_partial',
-                        'transport_hrl_n4_s0')
+# A run stored before the agent's config was nested (flat TrainArgs): the
+# calibrated transport run's stash at 6.75M steps (commit 46eba16).
+_OLD_RUN = os.path.join(_ROOT, 'tests', 'data', 'flat_config_run')
 _OLD_STATE = os.path.join(_OLD_RUN, 'checkpoints', 'ckpt_00000659',
                           'state.json')
 _CLIS = (config_lib.TrainArgs, evaluate.EvalArgs, video.VideoArgs,
