@@ -15,6 +15,8 @@ import sys
 
 import tyro
 
+from agents import fields
+
 
 class _Rejected(Exception):
   """A value that a config's `__post_init__` refused, to report as one line."""
@@ -48,7 +50,7 @@ def _flags(instance, skip):
       continue
     if field.name in skip or value == field.default:
       continue
-    flag = '--' + field.name.replace('_', '-')
+    flag = fields.flag(field.name)
     if isinstance(value, bool):
       yield flag if value else '--no-' + flag[2:]
     elif isinstance(value, tuple):
