@@ -1,7 +1,7 @@
 """Training throughput as ratios to raw MuJoCo, all measured in one run.
 
     python benchmarks/training_throughput.py
-    python benchmarks/training_throughput.py --task corridor --iterations 6
+    python benchmarks/training_throughput.py --task corridor --updates 6
 
 "raw" is the loop a bare simulator runs on the very same compiled model:
 set `ctrl`, then one `mujoco.mj_step` per physics substep. It replays the
@@ -17,12 +17,12 @@ median over the blocks of raw time / measured time. Prints:
   environment + lower layer, copy by copy / raw
                                    (each copy's `CommandWrapper.step`)
   pipeline with N actors / (N x raw), N = 1, 2     (target >= 0.60 at 2)
-  the learner's share of a 2-actor iteration
+  the learner's share of a 2-actor update
 
 The one-core loops run in a child process pinned to one CPU with the
 actors' single-threaded settings (`actor_pool.ACTOR_ENV_VARS`); the
 pipelines are `coop-train`'s own loop (`learner_loop.train`, Ray actors)
-with the default training settings, the first iteration (start-up,
+with the default training settings, the first update (start-up,
 compilation) left out. Commands are random; the shipped lower layer
 walks unless --controller is given.
 """
@@ -154,14 +154,14 @@ def pipeline(args, actors, logdir):
   """(env steps/s, learner's share) of coop-train's loop with `actors`."""
   rows = []
   train_args = _train_args(args, actors, logdir)
-  per_iteration = (actors * args.envs_per_actor
+  per_update = (actors * args.envs_per_actor
                    * train_args.hierarchy.sequence_length
                    * round(train_args.command_period / 0.05))
   train_args = dataclasses.replace(
-      train_args, total_steps=per_iteration * args.iterations)
+      train_args, total_steps=per_update * args.updates)
   learner_loop.train(train_args,
-                     on_iteration=lambda i, row, pool: rows.append(row))
-  rows = rows[1:]  # Without the first iteration.
+                     on_update=lambda u, row, pool: rows.append(row))
+  rows = rows[1:]  # Without the first update.
   steps = sum(r['sps'] * (r['time/collect'] + r['time/learn']) for r in rows)
   seconds = sum(r['time/collect'] + r['time/learn'] for r in rows)
   learn = sum(r['time/learn'] for r in rows)
@@ -182,8 +182,8 @@ def main(argv=None):
   parser.add_argument('--n-agents', type=int, default=4)
   parser.add_argument('--envs-per-actor', type=int,
                       default=config_lib.TrainArgs.envs_per_actor)
-  parser.add_argument('--iterations', type=int, default=6,
-                      help='pipeline iterations, the first left out')
+  parser.add_argument('--updates', type=int, default=6,
+                      help='pipeline updates, the first left out')
   parser.add_argument('--block-steps', type=int, default=400,
                       help='control steps per timed block (all copies)')
   parser.add_argument('--blocks', type=int, default=9)
@@ -217,7 +217,7 @@ def main(argv=None):
       ('env + lower layer, copy by copy / raw', single['copy_by_copy'], ''),
       ('pipeline, 1 actor / raw', one / raw, ''),
       ('pipeline, 2 actors / (2 x raw)', two / (2 * raw), '>= 0.60'),
-      ("learner's share of a 2-actor iteration", learner_share, ''),
+      ("learner's share of a 2-actor update", learner_share, ''),
   ]
   for name, value, target in lines:
     print(f'{name:42s} {value:5.2f}  {target}')

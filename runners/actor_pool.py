@@ -1,7 +1,7 @@
 """Where the rollout workers run: in this process, or as Ray actors.
 
-Both pools answer `collect(variables, version) -> [Rollout]` (in worker
-order) for one synchronous PPO iteration:
+Both pools answer `collect(variables, update) -> [Rollout]` (in worker
+order) for one synchronous PPO update:
 
 * `LocalPool` (`--actors 0`): one `RolloutWorker` in this process, no Ray.
 * `RayPool`: one Ray actor process per worker. The variables are
@@ -9,7 +9,8 @@ order) for one synchronous PPO iteration:
   `ray.wait` in completion order. A worker whose process dies (a crash,
   `kill -9`, a lost node) is restarted by Ray (`max_restarts`); its pending
   rollout is submitted again with the same variables reference, so the
-  restarted worker is re-synced and the iteration still uses one version.
+  restarted worker is re-synced and the update still learns from one set
+  of variables.
 
 Ray notes (see docs/training.md): actors run with `JAX_PLATFORMS=cpu` and
 single-threaded XLA/OpenMP, set through the actor's runtime environment
@@ -40,10 +41,10 @@ ACTOR_ENV_VARS = {
 CPU's worth of work; more threads only contend with the other actors)."""
 
 
-def worker_seeds(seed: int, start_iteration: int, num_workers: int):
-  """One seed per worker; a resumed run (start_iteration > 0) gets new ones
-  so it does not replay the first iterations' episodes."""
-  sequence = np.random.SeedSequence([seed, start_iteration])
+def worker_seeds(seed: int, start_update: int, num_workers: int):
+  """One seed per worker; a resumed run (start_update > 0) gets new ones
+  so it does not replay the first updates' episodes."""
+  sequence = np.random.SeedSequence([seed, start_update])
   return [int(s >> 1) for s in sequence.generate_state(num_workers)]
 
 
@@ -55,8 +56,8 @@ class LocalPool:
   def __init__(self, spec, config, num_envs: int, seed: int):
     self._worker = rollout.RolloutWorker(spec, config, 0, seed, num_envs)
 
-  def collect(self, variables, version, on_result=None):
-    result = self._worker.collect(variables, version)
+  def collect(self, variables, update, on_result=None):
+    result = self._worker.collect(variables, update)
     if on_result is not None:
       on_result(result)
     return [result]
@@ -202,7 +203,7 @@ class RayPool:
     """Process ids of the workers (e.g. to kill one in a test)."""
     return self._ray.get([w.ping.remote() for w in self._workers])
 
-  def collect(self, variables, version,
+  def collect(self, variables, update,
               on_result: Optional[Callable[[Any], None]] = None):
     """One rollout per worker, all with `variables` (see module doc).
 
@@ -211,7 +212,7 @@ class RayPool:
     ray = self._ray
     variables_ref = ray.put(variables)  # Once; every worker reads the ref.
     submit = lambda i: self._workers[i].collect.remote(
-        variables_ref, version, self._spec_ref)
+        variables_ref, update, self._spec_ref)
     pending = {submit(i): i for i in range(len(self._workers))}
     results = {}
     while pending:

@@ -1,15 +1,15 @@
 """Checkpoints of a run, through orbax: every species' learner plus counters.
 
-One checkpoint is one orbax step, `<logdir>/checkpoints/<iteration>/`:
+One checkpoint is one orbax step, `<logdir>/checkpoints/<update>/`:
 
   learners/   {species name: that species' saved learner state} (a PyTree
               item: params, optimiser, normalisers, update counter, PRNG
               key; `Learner.save()`)
-  state/      a JSON item: counters (iteration, env_steps, episodes,
+  state/      a JSON item: counters (update, env_steps, episodes,
               wall_time, restarts), the run's `TrainArgs`, the agent's
               `HierarchyConfig`, the species layout, the episode window and
               each learner's kind and format
-  metrics/    on the iterations saved as a new best: the episode window's
+  metrics/    on the updates saved as a new best: the episode window's
               success and return
 
 One `orbax.checkpoint.CheckpointManager` writes them (`save`),
@@ -23,10 +23,12 @@ something else (a full disk, a copy cut short) is named and passed over for
 the one before it. `coop-eval --checkpoint <logdir>/checkpoints/best` reads
 the best one.
 
-Runs from before orbax (`checkpoints/ckpt_<iteration>/` and `checkpoints/
+Runs from before orbax (`checkpoints/ckpt_<update>/` and `checkpoints/
 best/`, each with a `<species>.msgpack` per learner and `state.json`) read as
 before and resume; the resumed run writes orbax steps beside them, and the
 old checkpoints go as the newest `keep` (and a new best) replace them.
+States of format 1 and 2 name the update counter 'iteration'; they read
+with it renamed (`_upgrade`).
 """
 import contextlib
 import glob
@@ -40,7 +42,7 @@ import numpy as np
 
 from runners import run_dir
 
-FORMAT = 2
+FORMAT = 3
 """The layout of the state item (1: the `state.json` of runs before orbax)."""
 BEST = 'best'
 STATE_FILE = 'state.json'  # Runs before orbax.
@@ -100,9 +102,9 @@ def save(logdir: str, learners: Mapping[str, Any], state: dict[str, Any],
   Args:
     logdir: the run directory (its one writer calls this).
     learners: {species name: learner} (`save()` gives its state).
-    state: JSON-able dict with at least 'iteration' (counters, config...).
+    state: JSON-able dict with at least 'update' (counters, config...).
     keep: newest checkpoints kept; older ones are deleted unless best.
-    score: (success, return) of the episode window when this iteration is
+    score: (success, return) of the episode window when this update is
       a new best (kept as the best until one scores higher), else None.
   """
   import jax  # pylint: disable=g-import-not-at-top
@@ -118,19 +120,19 @@ def save(logdir: str, learners: Mapping[str, Any], state: dict[str, Any],
   metrics = None
   if score is not None:
     metrics = {'success': score[0], 'return': score[1]}
-  iteration = int(state['iteration'])
+  update = int(state['update'])
   with _manager(_directory(logdir), keep) as manager, _orbax_quiet():
-    manager.save(iteration, metrics=metrics, force=True,
+    manager.save(update, metrics=metrics, force=True,
                  args=ocp.args.Composite(learners=ocp.args.PyTreeSave(arrays),
                                          state=ocp.args.JsonSave(state)))
   _remove_legacy(logdir, keep, best=score is not None)
-  return os.path.join(_directory(logdir), str(iteration))
+  return os.path.join(_directory(logdir), str(update))
 
 
-def discard_after(logdir: str, iteration: int) -> None:
-  """Deletes the checkpoints after `iteration` (a resumed run redoes them)."""
+def discard_after(logdir: str, update: int) -> None:
+  """Deletes the checkpoints after `update` (a resumed run redoes them)."""
   for checkpoint in list_checkpoints(logdir):
-    if _iteration(checkpoint) > iteration:
+    if _update(checkpoint) > update:
       shutil.rmtree(checkpoint)
 
 
@@ -142,10 +144,10 @@ def list_checkpoints(logdir: str) -> list[str]:
     with _manager(_directory(logdir)) as manager:
       found += [os.path.join(_directory(logdir), str(step))
                 for step in manager.all_steps()]
-  return sorted(found, key=lambda path: (_iteration(path), _is_step(path)))
+  return sorted(found, key=lambda path: (_update(path), _is_step(path)))
 
 
-def _iteration(checkpoint: str) -> int:
+def _update(checkpoint: str) -> int:
   return int(os.path.basename(checkpoint).removeprefix(_LEGACY_PREFIX))
 
 
@@ -196,7 +198,7 @@ def resolve(path: str, report: Callable[[str], None] = _report) -> str:
   found = list_checkpoints(path)
   if not found:
     raise FileNotFoundError(f'No checkpoint in {path!r}: expected a run '
-                            'directory with checkpoints/<iteration>/ or a '
+                            'directory with checkpoints/<update>/ or a '
                             'checkpoint directory.')
   damaged = []
   for checkpoint in reversed(found):
@@ -235,14 +237,15 @@ def _read(checkpoint: str, items=_ITEMS) -> dict[str, Any]:
   state = read['state']
   if not isinstance(state, dict):
     raise CorruptCheckpoint(f'{checkpoint} holds no checkpoint state.')
-  if state.get('format') != FORMAT:
+  if state.get('format') not in (2, FORMAT):
     raise ValueError(f'{checkpoint} has checkpoint format '
-                     f'{state.get("format")}, expected {FORMAT}.')
+                     f'{state.get("format")}, expected 2 or {FORMAT}.')
+  state = _upgrade(state)
   missing = [n for n in state.get('learners', {})
              if 'learners' in items and n not in read['learners']]
   if missing:
     raise CorruptCheckpoint(f'{checkpoint} holds no learner for {missing}.')
-  return {item: read[item] for item in items}
+  return {item: state if item == 'state' else read[item] for item in items}
 
 
 def read_state(checkpoint: str) -> dict[str, Any]:
@@ -338,6 +341,15 @@ def _read_legacy_state(checkpoint: str) -> dict[str, Any]:
   if state.get('format') != 1:
     raise ValueError(f'{checkpoint} has checkpoint format '
                      f'{state.get("format")}, expected 1.')
+  return _upgrade(state)
+
+
+def _upgrade(state: dict[str, Any]) -> dict[str, Any]:
+  """A state of format 1 or 2 in today's names: its counter 'iteration'
+  is the update counter."""
+  if 'update' not in state and 'iteration' in state:
+    state = {('update' if k == 'iteration' else k): v
+             for k, v in state.items()}
   return state
 
 

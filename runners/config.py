@@ -20,8 +20,8 @@ from typing import Any
 
 from agents import fields
 from agents.hierarchy import config as hierarchy_config_lib
+from agents.lowlevel.paradigms import PARADIGMS
 
-PARADIGMS = ('position', 'velocity')
 TIME_LIMIT = fields.equal(0, "the task's default") | fields.above(0)
 """Episode seconds: 0 for the task's default, else finite and > 0."""
 
@@ -51,7 +51,7 @@ class TrainArgs:
   update."""
   total_steps: int = _resumable(20_000_000, fields.COUNT)
   """Low-level environment steps to train for (0.05 s control steps of one
-  environment copy), rounded up to whole iterations."""
+  environment copy), rounded up to whole updates."""
   logdir: str = _resumable('')
   """Run directory; default runs/<task>_<agent>_n<n_agents>_s<seed>."""
   ray_address: str = _resumable('')
@@ -88,13 +88,13 @@ class TrainArgs:
   time_limit: float = fields.field(0.0, TIME_LIMIT)
   """Episode length in seconds; 0 keeps the task's default."""
   checkpoint_every: int = _resumable(1, fields.COUNT)
-  """Write a checkpoint every this many iterations (and at the end)."""
+  """Write a checkpoint every this many updates (and at the end)."""
   keep_checkpoints: int = _resumable(3, fields.COUNT)
   """Checkpoints kept; older ones are deleted."""
   keep_best: bool = _resumable(True)
-  """Also keep, in checkpoints/best/, the iteration whose full episode window
-  had the highest success rate (then return): PPO on these tasks can fall
-  back after a peak (docs/results.md)."""
+  """Also keep the checkpoint of the update whose full episode window had
+  the highest success rate (then return), read as <logdir>/checkpoints/best:
+  PPO on these tasks can fall back after a peak (docs/results.md)."""
   max_actor_restarts: int = _resumable(
       3, fields.equal(-1, 'without limit') | fields.NON_NEGATIVE)
   """Times Ray restarts each dead actor process (-1: without limit)."""

@@ -18,15 +18,15 @@ import json
 import numpy as np
 
 from agents import fields
+from agents.lowlevel.paradigms import PARADIGMS
 from runners import cli
-from runners.pretrain_locomotion import TASKS
 
 
 @dataclasses.dataclass(frozen=True)
 class EvalArgs:
   """What to evaluate."""
 
-  paradigm: str = fields.field('position', fields.one_of(*TASKS))
+  paradigm: str = fields.field('position', fields.one_of(*PARADIGMS))
   """'position' or 'velocity'."""
   controller: str = ''
   """Controller directory; default: the weights shipped in agents/lowlevel."""
@@ -86,7 +86,7 @@ def evaluate(args: EvalArgs) -> dict:
   options = {'resample_on_reach': False} if args.paradigm == 'position' else {}
   rows = []
   for episode in range(args.episodes):
-    env = coop_suite.load(TASKS[args.paradigm], 1, seed=args.seed + episode,
+    env = coop_suite.load(PARADIGMS[args.paradigm].task, 1, seed=args.seed + episode,
                           time_limit=args.time_limit, **options)
     timestep = env.reset()
     reached_at = None

@@ -265,7 +265,7 @@ def evaluate(args: EvalArgs, log=None) -> dict:
           f'{100 * np.mean([e["success"] for e in played[-args.episodes:]]):.1f}%')
     episodes += played
     per_model.append({'checkpoint': state['checkpoint'],
-                      'iteration': state['iteration'],
+                      'update': state['update'],
                       'env_steps': state['env_steps'],
                       'success': float(np.mean([e['success']
                                                 for e in played])),
@@ -299,7 +299,7 @@ def main(argv=None):
   print(f'{out["description"]}: {len(args.checkpoint)} model(s) x '
         f'{len(args.seeds)} seed(s) x {args.episodes} episodes')
   for model in out['models']:
-    print(f'  {model["checkpoint"]} (iteration {model["iteration"]}, '
+    print(f'  {model["checkpoint"]} (update {model["update"]}, '
           f'{model["env_steps"]} env steps): success '
           f'{100 * model["success"]:.1f}%')
   line = (f'success rate {100 * out["success"]:.1f}% +- '

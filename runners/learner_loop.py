@@ -5,23 +5,24 @@
 The one training loop: every variant, and the lower layer's pretraining
 (`agent='lowlevel'`, which `runners.pretrain_locomotion` sets up).
 
-One iteration (version v):
+One update (number u):
   1. every species' variables (params, observation statistics) are fetched
      from its `HierarchyLearner` once and handed to the pool (Ray: one
      `ray.put`, every actor reads the reference);
   2. every actor collects `sequence_length` commands of its copies with
-     version v (`RolloutWorker.collect`); a dead actor is restarted and its
-     rollout redone with the same version (`actor_pool.RayPool`);
+     the variables of update u (`RolloutWorker.collect`); a dead actor is
+     restarted and its rollout redone with the same ones
+     (`actor_pool.RayPool`);
   3. each species' learner trains once on the union of its rows from all
      actors (`types.concatenate`, in actor order, so a run is reproducible
      whatever order the rollouts arrived in);
   4. a row goes to metrics.csv / TensorBoard / the progress bar, and every
-     `checkpoint_every` iterations a checkpoint (`runners.checkpoints`).
+     `checkpoint_every` updates a checkpoint (`runners.checkpoints`).
 
-The run lasts ceil(total_steps / nominal steps per iteration) iterations,
+The run lasts ceil(total_steps / nominal steps per update) updates,
 nominal = actors x envs_per_actor x sequence_length x low-level steps per
 command; a resumed run collects what is left of total_steps at its own
-batch size. Ctrl-C / SIGTERM stop after the current iteration with a
+batch size. Ctrl-C / SIGTERM stop after the current update with a
 checkpoint; `--resume` continues from the newest one.
 """
 import dataclasses
@@ -109,11 +110,11 @@ def probe(spec: envs_lib.EnvSpec, config):
 
 
 def train(args: config_lib.TrainArgs,
-          on_iteration: Optional[Callable[..., None]] = None
+          on_update: Optional[Callable[..., None]] = None
           ) -> dict[str, Any]:
   """Runs (or resumes) a run; returns its last row plus 'checkpoint'.
 
-  `on_iteration(iteration, row, pool)` is called after every iteration.
+  `on_update(update, row, pool)` is called after every update.
   """
   # One writer per run directory, from the check that it is free to the end.
   with run_dir.RunLock(args.logdir):
@@ -126,7 +127,7 @@ def train(args: config_lib.TrainArgs,
       print(f'Writing to {os.path.abspath(args.logdir)}'
             + (f', resuming from {checkpoint}' if checkpoint else ''),
             flush=True)
-      return _train(args, checkpoint, on_iteration)
+      return _train(args, checkpoint, on_update)
     finally:
       if owns_ray:
         import ray  # pylint: disable=g-import-not-at-top
@@ -174,7 +175,7 @@ def initialize_from_runs(args: config_lib.TrainArgs,
     print(f'{species}: parameters and normalisers from {source}', flush=True)
 
 
-def _train(args, checkpoint, on_iteration):
+def _train(args, checkpoint, on_update):
   config = args.hierarchy
   spec = environment_spec(args)
   layout, keys, per_action, dt = probe(spec, config)
@@ -182,7 +183,7 @@ def _train(args, checkpoint, on_iteration):
     rows = args.num_actors * args.envs_per_actor * len(s.agents)
     if rows % config.num_minibatches:
       raise ValueError(
-          f'Species {s.name!r} has {rows} agents per iteration (actors x '
+          f'Species {s.name!r} has {rows} agents per update (actors x '
           f'envs-per-actor x {len(s.agents)}), not divisible by '
           f'--num-minibatches {config.num_minibatches}.')
   if spec.controller_files and not _has_controller_copy(args):
@@ -191,7 +192,7 @@ def _train(args, checkpoint, on_iteration):
   learners = make_learners(config, layout)
   if checkpoint is None:
     initialize_from_runs(args, learners)
-  counters = {'iteration': 0, 'env_steps': 0, 'episodes': 0,
+  counters = {'update': 0, 'env_steps': 0, 'episodes': 0,
               'wall_time': 0.0, 'restarts': 0}
   window = metrics_lib.EpisodeWindow(keys, args.window, dt)
   best_score = None  # (success, return) of the best full window so far.
@@ -201,24 +202,24 @@ def _train(args, checkpoint, on_iteration):
     window.restore(saved.get('window', []))
     if saved.get('best_score') is not None:  # JSON gives a list.
       best_score = tuple(saved['best_score'])
-    # Later iterations are redone, as the metrics rows after this one.
-    checkpoints.discard_after(args.logdir, counters['iteration'])
+    # Later updates are redone, as the metrics rows after this one.
+    checkpoints.discard_after(args.logdir, counters['update'])
   state = {'args': args.to_dict(), 'agent_config': config_lib.json_safe(
       dataclasses.asdict(config)), 'species': [s.to_dict() for s in layout]}
-  per_iteration = (args.num_actors * args.envs_per_actor
+  per_update = (args.num_actors * args.envs_per_actor
                    * config.sequence_length * per_action)
   # What is left of the budget, at today's batch size (a resumed run may
-  # collect more or less per iteration than before).
-  iterations = counters['iteration'] + math.ceil(
-      max(0, args.total_steps - counters['env_steps']) / per_iteration)
+  # collect more or less per update than before).
+  updates = counters['update'] + math.ceil(
+      max(0, args.total_steps - counters['env_steps']) / per_update)
   n_agents = sum(len(s.agents) for s in layout)
 
   log = run_dir.MetricsLog(
       args.logdir, metrics_lib.columns(keys, learners),
-      resume_update=counters['iteration'] if checkpoint else None)
-  progress = metrics_lib.Progress(iterations * per_iteration,
+      resume_update=counters['update'] if checkpoint else None)
+  progress = metrics_lib.Progress(updates * per_update,
                                   counters['env_steps'], args.progress)
-  saved_at = counters['iteration']  # The iteration whose state is on disk.
+  saved_at = counters['update']  # The update whose state is on disk.
   restarts_at_start = counters['restarts']
   learning = False
   row = {}
@@ -231,16 +232,16 @@ def _train(args, checkpoint, on_iteration):
 
   pool = None
   try:
-    pool = _make_pool(args, spec, config, counters['iteration'])
+    pool = _make_pool(args, spec, config, counters['update'])
     with run_dir.GracefulStop() as stop:
-      while counters['iteration'] < iterations and not stop.requested:
+      while counters['update'] < updates and not stop.requested:
         tick = time.perf_counter()
         variables = {name: dict(zip(rollout.VARIABLE_NAMES, jax.device_get(
             learner.get_variables(rollout.VARIABLE_NAMES))))
                      for name, learner in learners.items()}
-        results = pool.collect(variables, counters['iteration'])
+        results = pool.collect(variables, counters['update'])
         collected = time.perf_counter()
-        assert all(r.version == counters['iteration'] for r in results)
+        assert all(r.update == counters['update'] for r in results)
         losses = {}
         learning = True  # Learners change now: no checkpoint on error.
         for name, learner in learners.items():
@@ -250,14 +251,14 @@ def _train(args, checkpoint, on_iteration):
         seconds = time.perf_counter() - tick
         steps = sum(r.env_steps for r in results)
         episodes = [e for r in results for e in r.episodes]
-        counters['iteration'] += 1
+        counters['update'] += 1
         counters['env_steps'] += steps
         counters['episodes'] += len(episodes)
         counters['wall_time'] += seconds
         counters['restarts'] = restarts_at_start + pool.restarts
         learning = False
         window.extend(episodes)
-        row = {'update': counters['iteration'],
+        row = {'update': counters['update'],
                'env_steps': counters['env_steps'],
                'agent_steps': counters['env_steps'] * n_agents,
                'wall_time': round(counters['wall_time'], 2),
@@ -273,22 +274,22 @@ def _train(args, checkpoint, on_iteration):
                                              or score > best_score)
         if best:
           best_score = score
-        if (best or counters['iteration'] % args.checkpoint_every == 0
-            or counters['iteration'] == iterations or stop.requested):
+        if (best or counters['update'] % args.checkpoint_every == 0
+            or counters['update'] == updates or stop.requested):
           save(score if best else None)
-          saved_at = counters['iteration']
-        if on_iteration is not None:
-          on_iteration(counters['iteration'], row, pool)
+          saved_at = counters['update']
+        if on_update is not None:
+          on_update(counters['update'], row, pool)
   except BaseException:
-    if not learning and saved_at < counters['iteration']:
-      save()  # The last complete iteration is not lost.
+    if not learning and saved_at < counters['update']:
+      save()  # The last complete update is not lost.
     raise
   finally:
     progress.close()
     log.close()
     if pool is not None:
       pool.close()
-  return {**row, 'iterations': iterations, 'stopped_by': stop.signal,
+  return {**row, 'updates': updates, 'stopped_by': stop.signal,
           'checkpoint': (checkpoints.list_checkpoints(args.logdir) or [''])[-1]}
 
 
@@ -300,8 +301,8 @@ def _window_score(row):
   return tuple(float(v) for v in score)
 
 
-def _make_pool(args, spec, config, iteration):
-  seeds = actor_pool.worker_seeds(args.seed, iteration, args.num_actors)
+def _make_pool(args, spec, config, update):
+  seeds = actor_pool.worker_seeds(args.seed, update, args.num_actors)
   if args.actors == 0:
     return actor_pool.LocalPool(spec, config, args.envs_per_actor, seeds[0])
   return actor_pool.RayPool(spec, config, args.envs_per_actor, seeds,

@@ -12,7 +12,7 @@ What we fill (`layout`): env_name `coop_suite`; task_name the evaluation
 task and population, `<task>_n<N>` (ravine: N crossers; a ravine stage
 other than joint adds it, `ravine_pushers_n2`); algorithm_name the variant
 (`hrl`, `no_memory`, `flat`, `mappo`); run_name `seed_<training seed>` (as
-BenchMARL names runs); one logging step per model, `step_<iteration>` of
+BenchMARL names runs); one logging step per model, `step_<update>` of
 the evaluated checkpoint, with `step_count` its environment steps (0.05 s
 control steps of one environment copy) and every numeric episode figure
 (`success` 0 / 1, `return`, each `reward/<term>`, the task's progress
@@ -38,7 +38,7 @@ def layout(models: Iterable[dict[str, Any]]) -> dict[str, Any]:
 
   Args:
     models: one dict per model with 'task', 'n_agents', 'stage', 'agent',
-      'seed' (the training seed), 'iteration', 'env_steps' and 'episodes'
+      'seed' (the training seed), 'update', 'env_steps' and 'episodes'
       (one `metrics.episode_figures` dict per evaluation episode), as
       `runners.evaluate.evaluate` returns them under 'models'.
 
@@ -57,7 +57,7 @@ def layout(models: Iterable[dict[str, Any]]) -> dict[str, Any]:
       run, copy = f'seed_{model["seed"]}_{copy}', copy + 1
     names = list(dict.fromkeys(k for e in model['episodes'] for k in e))
     metrics = {k: [float(e[k]) for e in model['episodes']] for k in names}
-    runs[run] = {f'step_{model["iteration"]}': {
+    runs[run] = {f'step_{model["update"]}': {
         'step_count': int(model['env_steps']), **metrics},
                  ABSOLUTE: {k: list(v) for k, v in metrics.items()}}
   return data

@@ -1,6 +1,6 @@
 """What a cooperative run reports: episode figures, losses, throughput.
 
-One row per iteration goes to `metrics.csv` and TensorBoard (through
+One row per update goes to `metrics.csv` and TensorBoard (through
 `runners.run_dir.MetricsLog`, step = env_steps) and to the progress bar:
 
   update, env_steps, agent_steps, wall_time   counters
@@ -113,7 +113,7 @@ class Progress:
     if self._enabled and not self._interactive and (
         now - self._last > self._every):
       self._last = now
-      print(f'iteration {row["update"]} env_steps {row["env_steps"]} '
+      print(f'update {row["update"]} env_steps {row["env_steps"]} '
             + ' '.join(f'{k} {v}' for k, v in postfix.items()), flush=True)
 
   def close(self) -> None:

@@ -228,7 +228,7 @@ def evaluate_cell(cell: paper_plan.Cell, checkpoint: str, args: PaperArgs,
         'trained_n_agents': cell.n_agents, 'n_agents': n,
         'checkpoint': os.path.join('checkpoints',
                                    os.path.basename(checkpoint)),
-        'iteration': model['iteration'], 'env_steps': model['env_steps'],
+        'update': model['update'], 'env_steps': model['env_steps'],
         'budget': budget(cell, args), 'episodes': result['episodes'],
         'eval_seed': args.eval_seed,
         **{k: result[k] for k in ('success', 'success_se', 'return',
@@ -346,7 +346,10 @@ def run_plan(args: PaperArgs, plan=None,
                      'own --results and --runs (e.g. /tmp/paper/results '
                      f'/tmp/paper/runs), not {default.results} or '
                      f'{default.runs}.')
-  cells = selected(args, plan)
+  # is_done reads no checkpoint, so the JAX-before-Ray rule below holds.
+  cells = [cell for cell in selected(args, plan) if not is_done(cell, args)]
+  if not cells:
+    return None  # Nothing to train or evaluate: no Ray either.
   # Ray before anything reads a checkpoint: orbax starts JAX, and Ray's
   # processes are not to be started from a process where JAX runs threads.
   from runners import actor_pool  # pylint: disable=g-import-not-at-top

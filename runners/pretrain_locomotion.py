@@ -1,7 +1,7 @@
 """Pretrains the lower layer (walker controller): `coop-pretrain-lowlevel`.
 
     coop-pretrain-lowlevel --paradigm position
-    coop-pretrain-lowlevel --paradigm velocity --total-env-steps 8000000
+    coop-pretrain-lowlevel --paradigm velocity --total-steps 8000000
     coop-pretrain-lowlevel --paradigm position --resume
     coop-pretrain-lowlevel --paradigm position --export-only \
         --export-dir agents/lowlevel/weights/position
@@ -9,11 +9,15 @@
 A front of `coop-train`: these flags stand for a run of the 'lowlevel' agent
 on one Ant (`train_args`) with Brax's Ant PPO settings, which the one
 training loop runs (`runners.learner_loop`: the same actors, run directory,
-metrics, checkpoints and resumption as every cooperative run). At the end
-(also after Ctrl-C / SIGTERM, which stop after the current update with a
-checkpoint) the policy of the newest checkpoint is exported as a controller
-(`agents.lowlevel.save`) into `--export-dir` (default `<logdir>/controller`);
-`--export-only` exports it without training.
+metrics, checkpoints and resumption as every cooperative run). A flag that
+is also coop-train's has its name and meaning (`--actors`, `--total-steps`,
+`--sequence-length`, `--flat-sizes`, ...), so errors and resume checks name
+the flags given here; `--num-envs` (all copies) is this command's own.
+
+At the end (also after Ctrl-C / SIGTERM, which stop after the current update
+with a checkpoint) the policy of the newest checkpoint is exported as a
+controller (`agents.lowlevel.save`) into `--export-dir` (default
+`<logdir>/controller`); `--export-only` exports it without training.
 
 Position paradigm: `walk_to_target` (reward 5/(1+d) to a target 2-6 m away,
 seen as a heading-frame offset); velocity paradigm: `walk_velocity` (track a
@@ -30,45 +34,40 @@ import dataclasses
 import glob
 import json
 import os
-import re
 from typing import Any
 
 from agents import fields
+from agents.lowlevel.paradigms import PARADIGMS
 from runners import cli
 from runners import config as config_lib
 
-TASKS = {'position': 'walk_to_target', 'velocity': 'walk_velocity'}
-"""Paradigm -> the locomotion task its lower layer learns on."""
 # Brax's settings that are no flags here: a constant learning rate, raw
 # value targets, the distribution's own std floor, Brax's gradient clip.
 _FIXED = dict(agent='lowlevel', n_agents=1, keep_best=False, target_kl=0.0,
               normalize_values=False, min_action_std=1e-3, max_grad_norm=0.5)
-# coop-train's flags in errors -> this command's.
-_FLAGS = {'--sequence-length': '--unroll-length', '--flat-sizes': '--hidden',
-          '--total-steps': '--total-env-steps', '--actors': '--num-workers'}
 
 
 @dataclasses.dataclass(frozen=True)
 class Args:
   """Pretraining run settings (every field is a CLI flag)."""
 
-  paradigm: str = fields.field('position', fields.one_of(*TASKS))
+  paradigm: str = fields.field('position', fields.one_of(*PARADIGMS))
   """'position' (walk_to_target) or 'velocity' (walk_velocity)."""
   seed: int = 0
   """Seed of the networks, the action noise and the environments."""
-  total_env_steps: int = fields.field(12_000_000, fields.COUNT)
+  total_steps: int = fields.field(12_000_000, fields.COUNT)
   """Control steps over all environment copies; training stops at the first
   update that reaches it. The shipped position controller reached 100%
   success by 1M steps and was stopped at 11.3M (docs/results.md)."""
   num_envs: int = fields.field(128, fields.COUNT)
-  """Environment copies, all stepped with one parameter version per
-  update."""
-  num_workers: int = fields.field(2, fields.NON_NEGATIVE)
-  """Ray actors that step the copies, num_envs / num_workers each with its
-  own copy of the policy (0: all in this process, without Ray)."""
-  unroll_length: int = fields.field(32, fields.COUNT)
+  """Environment copies, all stepped with one update's parameters."""
+  actors: int = fields.field(2, fields.NON_NEGATIVE)
+  """Ray actors that step the copies, num_envs / actors each with its own
+  copy of the policy (0: all in this process, without Ray)."""
+  sequence_length: int = fields.field(32, fields.COUNT)
   """Control steps per copy in one rollout; a PPO update uses
-  num_envs * unroll_length steps collected with one parameter version."""
+  num_envs * sequence_length steps collected with one update's
+  parameters."""
   logdir: str = ''
   """Run directory; default runs/lowlevel_<paradigm>."""
   ray_address: str = ''
@@ -107,8 +106,9 @@ class Args:
   """Entropy bonus weight."""
   reward_scaling: float = 0.1
   """Rewards are multiplied by this inside PPO (the logged returns are not)."""
-  hidden: tuple[int, ...] = (256, 256)
-  """Hidden layer widths of the policy and of the value MLP."""
+  flat_sizes: tuple[int, ...] = fields.field((256, 256), fields.COUNT)
+  """Hidden layer widths of the policy and of the value MLP (coop-train's
+  flat networks)."""
 
   def __post_init__(self):
     fields.check(self)
@@ -117,45 +117,36 @@ class Args:
     if not self.export_dir:
       object.__setattr__(self, 'export_dir',
                          os.path.join(self.logdir, 'controller'))
-    object.__setattr__(self, 'hidden', tuple(self.hidden))
-    if self.num_envs % max(1, self.num_workers):
+    object.__setattr__(self, 'flat_sizes', tuple(self.flat_sizes))
+    if self.num_envs % max(1, self.actors):
       raise ValueError(f'--num-envs {self.num_envs} must be divisible by '
-                       f'--num-workers {self.num_workers}.')
+                       f'--actors {self.actors}.')
     if self.num_envs % self.num_minibatches:
       raise ValueError(f'--num-envs {self.num_envs} must be divisible by '
                        f'--num-minibatches {self.num_minibatches}.')
-    try:
-      self.train_args()  # Checks the rest, in this command's words.
-    except ValueError as e:
-      raise ValueError(in_our_words(e)) from None
+    self.train_args()  # Checks the rest (same flags, same words).
 
   def task(self) -> str:
-    return TASKS[self.paradigm]
+    return PARADIGMS[self.paradigm].task
 
   def train_args(self) -> config_lib.TrainArgs:
     """The `coop-train` run these flags stand for."""
     return config_lib.train_args(
         **_FIXED, task=self.task(), paradigm=self.paradigm,
-        actors=self.num_workers,
-        envs_per_actor=self.num_envs // max(1, self.num_workers),
-        total_steps=self.total_env_steps, seed=self.seed, logdir=self.logdir,
+        actors=self.actors,
+        envs_per_actor=self.num_envs // max(1, self.actors),
+        total_steps=self.total_steps, seed=self.seed, logdir=self.logdir,
         ray_address=self.ray_address, resume=self.resume,
         checkpoint_every=self.checkpoint_every,
         keep_checkpoints=self.keep_checkpoints, progress=self.progress,
         time_limit=self.time_limit or (
             10.0 if self.paradigm == 'position' else 0.0),
         resample_on_reach=self.resample_on_reach,
-        sequence_length=self.unroll_length, num_epochs=self.num_epochs,
+        sequence_length=self.sequence_length, num_epochs=self.num_epochs,
         num_minibatches=self.num_minibatches,
         learning_rate=self.learning_rate, entropy_cost=self.entropy_cost,
         discount=self.discount, gae_lambda=self.gae_lambda,
-        reward_scaling=self.reward_scaling, flat_sizes=self.hidden)
-
-
-def in_our_words(error: Exception) -> str:
-  """An error of the training loop with coop-train's flags renamed."""
-  return re.sub('|'.join(map(re.escape, _FLAGS)),
-                lambda m: _FLAGS[m.group(0)], str(error))
+        reward_scaling=self.reward_scaling, flat_sizes=self.flat_sizes)
 
 
 def check_not_an_old_run(logdir: str) -> None:
@@ -183,10 +174,10 @@ def export(args: Args, checkpoint: str) -> dict[str, Any]:
   from runners import run_dir  # pylint: disable=g-import-not-at-top
   spec, config, models, state = evaluate.load_model(
       checkpoint, evaluate.EvalArgs(checkpoint=(checkpoint,)))
-  if config.agent != 'lowlevel' or TASKS[args.paradigm] != spec.task:
+  if config.agent != 'lowlevel' or args.task() != spec.task:
     raise ValueError(f'{checkpoint} trained agent {config.agent!r} on '
                      f'{spec.task!r}, not the {args.paradigm}-paradigm lower '
-                     f'layer (agent lowlevel on {TASKS[args.paradigm]!r}).')
+                     f'layer (agent lowlevel on {args.task()!r}).')
   (species, _, _, learner), = models.values()
   params, normalizer = learner.get_variables(['params', 'normalizer'])
   # The 'flat' module's policy MLP is `policy_value`'s policy, by name.
@@ -201,7 +192,7 @@ def export(args: Args, checkpoint: str) -> dict[str, Any]:
   sizes = obs_lib.observation_sizes(env.observation_spec()[0],
                                     species.observation_keys)
   env.close()
-  iteration = state['iteration']
+  update = state['update']
   config_json = {
       'paradigm': args.paradigm, 'task': spec.task,
       'observation_keys': list(species.observation_keys),
@@ -211,11 +202,11 @@ def export(args: Args, checkpoint: str) -> dict[str, Any]:
       'env_config': dataclasses.asdict(task_config),
       'agent_config': state['agent_config'],
       'training': {
-          'update': iteration, 'env_steps': state['env_steps'],
+          'update': update, 'env_steps': state['env_steps'],
           'wall_time': state['wall_time'], 'seed': config.seed,
           'checkpoint': os.path.abspath(checkpoint),
           'final_metrics': run_dir.logged_row(
-              checkpoints.run_directory(checkpoint), iteration)}}
+              checkpoints.run_directory(checkpoint), update)}}
   run_dir.write_directory(args.export_dir,
                           controller_lib.files(policy, normalizer, config_json))
   return config_json
@@ -241,7 +232,6 @@ def main(argv=None):
   try:
     exported = train(args)
   except cli.user_errors() as e:
-    e.args = (in_our_words(e),)
     cli.fail('coop-pretrain-lowlevel', e)
   training = exported['training']
   print(json.dumps({'update': training['update'],

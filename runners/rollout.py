@@ -9,7 +9,7 @@ episode's first (step_type LAST), as `HierarchyActor` expects.
 `RolloutWorker` is what one actor process runs (a Ray actor, or the driver
 itself with `--actors 0`): one `HierarchyActor` per species over all rows of
 that species, so each command is one jitted policy call per species for
-all copies. `collect(variables, version)` acts with exactly those
+all copies. `collect(variables, update)` acts with exactly those
 variables for `sequence_length` commands and returns one `SequenceBatch`
 per species plus the episodes that ended.
 
@@ -189,18 +189,19 @@ class _Variables(core.VariableSource):
 
 
 class Rollout(NamedTuple):
-  """What one actor returns for one parameter version.
+  """What one actor returns for one update's variables.
 
   Attributes:
     worker: the actor's index.
-    version: the parameter version every command was chosen with.
+    update: the update whose variables chose every command (the
+      learner's update counter when they were taken).
     batches: {species: SequenceBatch [T, B_s]}.
     episodes: metric dicts of the episodes that ended during the rollout.
     env_steps: low-level steps taken by all copies together.
     seconds: wall time of the collection.
   """
   worker: int
-  version: int
+  update: int
   batches: dict[str, types.SequenceBatch]
   episodes: list[dict[str, Any]]
   env_steps: int
@@ -239,14 +240,14 @@ class RolloutWorker:
     """This process's id (also a liveness check)."""
     return os.getpid()
 
-  def collect(self, variables: dict[str, dict[str, Any]], version: int,
+  def collect(self, variables: dict[str, dict[str, Any]], update: int,
               spec: Optional[envs_lib.EnvSpec] = None) -> Rollout:
     """`sequence_length` commands of every copy with `variables`.
 
     Args:
       variables: {species: {'params', 'normalizer',
         'global_state_normalizer'}}, numpy pytrees from the learner.
-      version: returned as is; the caller's name for `variables`.
+      update: returned as is; the caller's name for `variables`.
       spec: the environments, if the constructor had none (used once).
     """
     start = time.perf_counter()
@@ -287,7 +288,7 @@ class RolloutWorker:
                       self._batch.rows[name][2])
     batches = {name: actor.take_rollout()
                for name, actor in self._actors.items()}
-    return Rollout(self._index, version, batches, episodes, env_steps,
+    return Rollout(self._index, update, batches, episodes, env_steps,
                    time.perf_counter() - start)
 
   def close(self) -> None:

@@ -9,7 +9,7 @@
 
 Writes to --logdir (default runs/<task>_<agent>_n<N>_s<seed>): metrics.csv
 and TensorBoard events (every reward term, success, losses, steps/s),
-checkpoints/<iteration>/ (orbax, atomic; the newest --keep-checkpoints and the best kept),
+checkpoints/<update>/ (orbax, atomic; the newest --keep-checkpoints and the best kept),
 controller/ (the lower layer the run uses). See docs/training.md.
 Evaluate with `coop-eval --checkpoint <logdir>`.
 """
@@ -38,8 +38,8 @@ def main(argv=None):
   print(f'checkpoint: {summary["checkpoint"]}')
   print(f'evaluate:   coop-eval --checkpoint {os.path.abspath(args.logdir)}')
   if summary.get('stopped_by'):
-    print(f'Stopped by {summary["stopped_by"]} after iteration '
-          f'{summary.get("update")} of {summary["iterations"]}; continue '
+    print(f'Stopped by {summary["stopped_by"]} after update '
+          f'{summary.get("update")} of {summary["updates"]}; continue '
           f'with: coop-train --logdir {args.logdir} --resume', flush=True)
     sys.exit(128 + signal.Signals[summary['stopped_by']].value)
 

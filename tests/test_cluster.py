@@ -98,15 +98,15 @@ def test_training_spreads_actors_over_two_nodes(cluster, tmp_path):
   assert host == '127.0.0.1'
   actor_nodes = []
 
-  def on_iteration(iteration, row, pool):
-    del iteration, row
+  def on_update(update, row, pool):
+    del update, row
     actor_nodes.append([_node_of(pid, raylets) for pid in pool.pids()])
 
   args = config_lib.train_args(**{
       **test_train.TINY, 'task': 'transport', 'actors': 2,
       'logdir': str(tmp_path / 'run'), 'ray_address': nodes.address,
-      'total_steps': 4 * test_train.STEPS})  # 2 iterations of 2 actors.
-  summary = learner_loop.train(args, on_iteration)
+      'total_steps': 4 * test_train.STEPS})  # 2 updates of 2 actors.
+  summary = learner_loop.train(args, on_update)
   assert summary['update'] == 2
   with open(tmp_path / 'run' / 'metrics.csv') as f:
     assert len(list(csv.DictReader(f))) == 2

@@ -27,9 +27,9 @@ from runners import run_dir
 # Ray starts processes with fork + exec, which JAX's fork warning cannot
 # tell from a bare fork.
 pytestmark = pytest.mark.filterwarnings('ignore:os.fork:RuntimeWarning')
-TINY = ['--num-envs', '8', '--unroll-length', '8', '--num-workers', '0',
-        '--hidden', '16', '--num-minibatches', '2', '--checkpoint-every', '1',
-        '--no-progress']
+TINY = ['--num-envs', '8', '--sequence-length', '8', '--actors', '0',
+        '--flat-sizes', '16', '--num-minibatches', '2',
+        '--checkpoint-every', '1', '--no-progress']
 
 
 # --- Observations ---------------------------------------------------------------
@@ -60,12 +60,12 @@ def tiny_run(tmp_path_factory):
   to 3 with the copies in one Ray actor."""
   logdir = str(tmp_path_factory.mktemp('pretrain') / 'run')
   argv = ['--paradigm', 'position', '--logdir', logdir, *TINY]
-  pretrain_locomotion.main(argv + ['--total-env-steps', '128'])
+  pretrain_locomotion.main(argv + ['--total-steps', '128'])
   with open(os.path.join(logdir, 'metrics.csv')) as f:
     first_rows = list(csv.DictReader(f))
   checkpoints_before = sorted(os.listdir(os.path.join(logdir, 'checkpoints')))
-  pretrain_locomotion.main(argv + ['--total-env-steps', '192', '--resume',
-                                   '--num-workers', '1'])
+  pretrain_locomotion.main(argv + ['--total-steps', '192', '--resume',
+                                   '--actors', '1'])
   return logdir, first_rows, checkpoints_before
 
 
@@ -113,9 +113,10 @@ def test_pretrain_refuses_what_it_cannot_continue(tiny_run, tmp_path,
   os.makedirs(old / 'checkpoints')
   (old / 'run_config.json').write_text('{}')
   (old / 'checkpoints' / 'ckpt_00000001.msgpack').write_bytes(b'')
-  cases = [(['--total-env-steps', '64'], '--resume'),
+  cases = [(['--total-steps', '64'], '--resume'),
            (['--resume', '--learning-rate', '1e-3'], '--learning-rate'),
-           (['--resume', '--unroll-length', '4'], '--unroll-length'),
+           (['--resume', '--sequence-length', '4'], '--sequence-length'),
+           (['--flat-sizes', '0'], '--flat-sizes must be >= 1'),
            (['--resume', '--logdir', str(old)], 'older coop-suite'),
            (['--export-only', '--logdir', str(old)], 'older coop-suite')]
   for more, match in cases:
@@ -126,7 +127,7 @@ def test_pretrain_refuses_what_it_cannot_continue(tiny_run, tmp_path,
   # One writer per run directory, as coop-train.
   with run_dir.RunLock(logdir):
     with pytest.raises(SystemExit):
-      pretrain_locomotion.main(argv + ['--resume', '--total-env-steps', '256'])
+      pretrain_locomotion.main(argv + ['--resume', '--total-steps', '256'])
   assert 'being written by another run' in capsys.readouterr().err
 
 
@@ -392,9 +393,9 @@ def test_cli_documents_every_flag_from_field_docstrings(capsys):
   assert 'Control steps per copy in one rollout' in help_text
   assert 'Rewards are multiplied by this inside PPO' in help_text
   args = cli.parse(pretrain_locomotion.Args,
-                   ['--paradigm', 'velocity', '--hidden', '32', '32',
+                   ['--paradigm', 'velocity', '--flat-sizes', '32', '32',
                     '--no-progress'])
-  assert args.hidden == (32, 32) and not args.progress
+  assert args.flat_sizes == (32, 32) and not args.progress
   assert args.logdir == 'runs/lowlevel_velocity'
   with pytest.raises(ValueError, match='paradigm'):
     pretrain_locomotion.Args(paradigm='running')

@@ -7,6 +7,7 @@ import shutil
 
 import pytest
 
+from runners import actor_pool
 from runners import checkpoints
 from runners import cli
 from runners import config as config_lib
@@ -27,7 +28,7 @@ BASELINES = os.path.join(os.path.dirname(__file__), '..', 'results',
 
 @pytest.fixture(scope='module')
 def tiny_run(tmp_path_factory, controller):  # pylint: disable=redefined-outer-name
-  """One iteration of 2 (the cells' budget) of TINY's hrl on transport."""
+  """One update of 2 (the cells' budget) of TINY's hrl on transport."""
   logdir = str(tmp_path_factory.mktemp('paper') / 'hrl')
   learner_loop.train(config_lib.train_args(
       **{**TINY, 'task': 'transport', 'logdir': logdir,
@@ -65,7 +66,7 @@ def _evaluation(cell, n_agents, successes, env_steps=20_000_000):
   per-episode successes."""
   episodes = [{'return': 100.0 * s, 'success': float(s)} for s in successes]
   model = {'task': cell.task, 'n_agents': n_agents, 'stage': cell.stage,
-           'agent': cell.agent, 'seed': cell.seed, 'iteration': 7,
+           'agent': cell.agent, 'seed': cell.seed, 'update': 7,
            'env_steps': env_steps, 'episodes': episodes}
   return {'cell': cell.name, 'n_agents': n_agents, 'env_steps': env_steps,
           'marl_eval': marl_eval.layout([model])}
@@ -141,11 +142,11 @@ def test_the_plan_is_the_papers():
 
 
 def test_the_plan_skips_done_cells_and_resumes_a_partial_one(
-    controller, tiny_run, tmp_path):  # pylint: disable=redefined-outer-name
+    controller, tiny_run, tmp_path, monkeypatch):  # pylint: disable=redefined-outer-name
   plan = _tiny_plan(controller)
   args = _args(tmp_path)
   partial, done = plan
-  # A run killed after iteration 1 of 2, with the cell's settings, stashed
+  # A run killed after update 1 of 2, with the cell's settings, stashed
   # at the end of a session; the next session has only the stash.
   shutil.copytree(tiny_run, paper.run_directory(partial, args))
   assert paper.status(partial, args) == paper.Status('partial', STEPS)
@@ -172,15 +173,18 @@ def test_the_plan_skips_done_cells_and_resumes_a_partial_one(
   for n in (2, 3):
     with open(os.path.join(folder, f'eval_n{n}.json')) as f:
       figures = json.load(f)
-    assert (figures['n_agents'], figures['iteration'], figures['env_steps'],
+    assert (figures['n_agents'], figures['update'], figures['env_steps'],
             figures['episodes']) == (n, 2, 2 * STEPS, 2)
     marl_eval.check(figures['marl_eval'])
     assert list(figures['marl_eval']['coop_suite']) == [f'transport_n{n}']
   # The committed copy evaluates on its own.
   out = evaluate.evaluate(evaluate.EvalArgs(checkpoint=(folder,), episodes=1,
                                             envs=1))
-  assert out['models'][0]['iteration'] == 2
-  paper.run_plan(args, plan, log=pytest.fail)  # Nothing left to do.
+  assert out['models'][0]['update'] == 2
+  # Nothing left to do: nothing logged, and Ray not even started.
+  monkeypatch.setattr(actor_pool, 'init_ray',
+                      lambda *a, **k: pytest.fail('Ray started'))
+  paper.run_plan(dataclasses.replace(args, actors=2), plan, log=pytest.fail)
 
 
 def test_report_rebuilds_the_tables_from_committed_results(tmp_path, capsys):

@@ -44,13 +44,13 @@ class FakeLearner:
 exec(FAKE_LEARNER)  # pylint: disable=exec-used
 
 
-def _state(iteration):
-  return {'iteration': iteration, 'species': [{'name': 'ant'}]}
+def _state(update):
+  return {'update': update, 'species': [{'name': 'ant'}]}
 
 
-def _save(logdir, iteration, keep=5, score=None):
-  return checkpoints.save(logdir, {'ant': FakeLearner(iteration)},
-                          _state(iteration), keep, score)
+def _save(logdir, update, keep=5, score=None):
+  return checkpoints.save(logdir, {'ant': FakeLearner(update)},
+                          _state(update), keep, score)
 
 
 def _truncate_arrays(checkpoint):
@@ -152,7 +152,7 @@ def test_damaged_newest_checkpoint_is_named_and_passed_over(tmp_path):
 
 @pytest.fixture(scope='module')
 def run3(tmp_path_factory, controller):  # pylint: disable=redefined-outer-name
-  """Three iterations in one process."""
+  """Three updates in one process."""
   logdir = str(tmp_path_factory.mktemp('runs') / 'three')
   learner_loop.train(_args(logdir, controller, total_steps=3 * STEPS))
   return logdir
@@ -202,13 +202,13 @@ def test_resume_and_eval_fall_back_from_a_damaged_checkpoint(
     learner_loop.train(_args(str(tmp_path / 'other'), controller,
                              resume_from=chosen))
   monkeypatch.setattr(learner_loop, 'train', lambda args: real_train(
-      args, on_iteration=lambda *_: os.kill(os.getpid(), signal.SIGTERM)))
+      args, on_update=lambda *_: os.kill(os.getpid(), signal.SIGTERM)))
   with pytest.raises(SystemExit) as exit_info:
     train.main(['--resume-from', chosen, *_argv(controller, 5 * STEPS)])
   assert exit_info.value.code == 128 + signal.SIGTERM
   out = capsys.readouterr().out
   assert 'resuming from ' + chosen in out
-  assert 'Stopped by SIGTERM after iteration 3 of 5' in out
+  assert 'Stopped by SIGTERM after update 3 of 5' in out
   assert [int(r['update']) for r in _rows(logdir)] == [1, 2, 3]
   last = checkpoints.resolve(logdir)  # Written by the stopped run.
   assert checkpoints.read_state(last)['args']['resume_from'] == chosen
@@ -255,7 +255,7 @@ def test_the_newest_and_the_best_are_kept(tmp_path):
   assert checkpoints.resolve(best) == paths[2]
   assert checkpoints.resolve(logdir) == paths[5]
   state = checkpoints.read_state(paths[2])
-  assert state['iteration'] == 3 and state['format'] == checkpoints.FORMAT
+  assert state['update'] == 3 and state['format'] == checkpoints.FORMAT
   checkpoints.discard_after(logdir, 4)  # A run resumed from 4 redoes 5, 6.
   assert checkpoints.list_checkpoints(logdir) == [paths[2]]
   other = str(tmp_path / 'other')
@@ -264,12 +264,27 @@ def test_the_newest_and_the_best_are_kept(tmp_path):
     checkpoints.resolve(os.path.join(other, 'checkpoints', checkpoints.BEST))
 
 
+def test_a_format_2_checkpoint_reads_with_its_counter_named_update():
+  """Orbax checkpoints written before the counter's rename (format 2, the
+  published seed-0 cell) read, and resume, as `update`."""
+  published = os.path.join(REPO, 'results', 'paper', 'transport_hrl_n4_s0',
+                           'checkpoints', '1465')
+  with open(os.path.join(published, 'state', 'metadata')) as f:
+    on_disk = json.load(f)
+  assert on_disk['format'] == 2 and on_disk['iteration'] == 1465
+  state = checkpoints.read_state(published)
+  assert state['update'] == 1465 and 'iteration' not in state
+  assert state['env_steps'] == on_disk['env_steps']
+
+
 def _to_old_layout(checkpoint, learners):
   """`checkpoint` as a run from before orbax wrote it:
   `ckpt_<iteration>/` with `<species>.msgpack` (what `learner.save(path)`
-  wrote) and `state.json`; returns that directory."""
+  wrote) and `state.json`, its counter named 'iteration'; returns that
+  directory."""
   state = checkpoints.restore(checkpoint, learners)
   del state['learners']
+  state['iteration'] = state.pop('update')
   old = os.path.join(os.path.dirname(checkpoint),
                      f'ckpt_{state["iteration"]:08d}')
   os.makedirs(old)
@@ -298,15 +313,15 @@ def test_a_run_from_before_orbax_evaluates_and_resumes(run3, controller,
   # The old files restore the same state, bit for bit.
   _, _, models, state = evaluate.load_model(old[1], evaluate.EvalArgs(
       checkpoint=(logdir,)))
-  assert state['iteration'] == 2
+  assert state['update'] == 2 and 'iteration' not in state
   for name, model in models.items():
     for a, b in zip(jax.tree.leaves(want[name]),
                     jax.tree.leaves(jax.device_get(model[3].state))):
       np.testing.assert_array_equal(a, b)
   evaluate.main(['--checkpoint', logdir, '--episodes', '1', '--envs', '1'])
-  assert 'iteration 3' in capsys.readouterr().out
+  assert 'update 3' in capsys.readouterr().out
 
-  # Resumed, it continues from the old iteration 3 in orbax steps; the old
+  # Resumed, it continues from the old update 3 in orbax steps; the old
   # checkpoints go as the newest --keep-checkpoints (3) replace them.
   summary = learner_loop.train(_args(logdir, controller, resume=True,
                                      total_steps=5 * STEPS))

@@ -29,7 +29,7 @@ from runners import learner_loop
 from runners import run_dir
 from runners import train
 
-# 2 copies x 4 commands of 0.1 s (2 control steps): 16 env steps/iteration.
+# 2 copies x 4 commands of 0.1 s (2 control steps): 16 env steps/update.
 TINY = dict(n_agents=2, actors=0, envs_per_actor=2, command_period=0.1,
             sequence_length=4, num_minibatches=2, num_epochs=1,
             upper_layer_sizes=(16,), middle_layer_size=8, head_sizes=(8,),
@@ -98,7 +98,7 @@ def _learner_params(checkpoint, species):
 
 @pytest.fixture(scope='module')
 def hrl_run(tmp_path_factory, controller):
-  """Two iterations of 'hrl' through the real CLI, in one process."""
+  """Two updates of 'hrl' through the real CLI, in one process."""
   logdir = str(tmp_path_factory.mktemp('runs') / 'hrl')
   train.main(['--task', 'transport', '--logdir', logdir,
               *_argv(controller, 2 * STEPS)])
@@ -107,7 +107,7 @@ def hrl_run(tmp_path_factory, controller):
 
 @pytest.mark.parametrize('agent', sorted(VARIANT_TASKS))
 def test_variant_trains_in_process(agent, controller, hrl_run, tmp_path):
-  # 'flat' acts every control step: 8 env steps per iteration.
+  # 'flat' acts every control step: 8 env steps per update.
   total = 2 * (STEPS // 2 if agent == 'flat' else STEPS)
   if agent == 'hrl':
     logdir = hrl_run
@@ -136,7 +136,7 @@ def test_checkpoints_keep_the_newest_and_resume_continues(controller, hrl_run,
   logdir = str(tmp_path / 'resumed')
   shutil.copytree(hrl_run, logdir)
   first = checkpoints.read_state(checkpoints.resolve(logdir))
-  assert (first['iteration'], first['env_steps']) == (2, 2 * STEPS)
+  assert (first['update'], first['env_steps']) == (2, 2 * STEPS)
   with pytest.raises(FileExistsError, match='--resume'):
     learner_loop.train(_args(logdir, controller))
   with pytest.raises(ValueError, match='--agent'):
@@ -158,8 +158,8 @@ def test_checkpoints_keep_the_newest_and_resume_continues(controller, hrl_run,
 
 def test_best_checkpoint_holds_the_best_full_window(controller, tmp_path,
                                                    capsys):
-  # Episodes of 0.8 s are 2 iterations: with a window of 2 episodes it is
-  # full from iteration 2 on (both copies have ended one episode).
+  # Episodes of 0.8 s are 2 updates: with a window of 2 episodes it is
+  # full from update 2 on (both copies have ended one episode).
   logdir = str(tmp_path / 'best')
   learner_loop.train(_args(logdir, controller, window=2,
                            total_steps=6 * STEPS))
@@ -168,7 +168,7 @@ def test_best_checkpoint_holds_the_best_full_window(controller, tmp_path,
   winner = rows[scores.index(max(scores))]  # First of equal scores.
   best = os.path.join(logdir, 'checkpoints', checkpoints.BEST)
   state = checkpoints.read_state(checkpoints.resolve(best))
-  assert state['iteration'] == int(winner['update'])
+  assert state['update'] == int(winner['update'])
   assert tuple(state['best_score']) == max(scores)
   assert checkpoints.list_checkpoints(logdir)[-1].endswith('6')
   # The newest checkpoint carries the score, so a resumed run continues it.
@@ -198,10 +198,10 @@ def test_ray_actors_survive_kill_minus_9(ray_cluster, controller, tmp_path):
   # running 20 ms after a collect starts, so the kill lands mid-rollout.
   slow = dict(actors=2, envs_per_actor=1, command_period=0.25,
               sequence_length=32, time_limit=1.0)  # Whole periods.
-  per_iteration = 2 * 1 * 32 * 5
+  per_update = 2 * 1 * 32 * 5
 
-  def kill_one_actor(iteration, row, pool):
-    if iteration == 2:
+  def kill_one_actor(update, row, pool):
+    if update == 2:
       pids = pool.pids()
       assert len(set(pids)) == 2 and os.getpid() not in pids
       collect = pool.collect
@@ -215,12 +215,12 @@ def test_ray_actors_survive_kill_minus_9(ray_cluster, controller, tmp_path):
       pool.collect = collect_and_kill
 
   summary = learner_loop.train(
-      _args(tmp_path / 'ray', controller, total_steps=5 * per_iteration,
+      _args(tmp_path / 'ray', controller, total_steps=5 * per_update,
             **slow),
-      on_iteration=kill_one_actor)
+      on_update=kill_one_actor)
   killed[0].join()
-  assert summary['update'] == summary['iterations'] == 5
-  assert summary['env_steps'] == 5 * per_iteration
+  assert summary['update'] == summary['updates'] == 5
+  assert summary['env_steps'] == 5 * per_update
   assert summary['restarts'] == 1
   rows = _rows(tmp_path / 'ray')
   assert [int(r['update']) for r in rows] == [1, 2, 3, 4, 5]
@@ -247,7 +247,7 @@ def test_the_stability_figures_are_logged_and_checkpointed(hrl_run):
   # The std floor holds (softplus + 0.1), the rate stays within its bounds.
   assert all(float(r['learner/ant/action_std']) > 0.1 for r in rows)
   assert all(0 < float(r['learner/ant/learning_rate']) <= 1e-2 for r in rows)
-  # The value statistics travel in the checkpoint: 2 iterations of 4
+  # The value statistics travel in the checkpoint: 2 updates of 4
   # commands x 4 rows (2 copies x 2 agents).
   checkpoint = checkpoints.resolve(hrl_run)
   state = checkpoints.read_state(checkpoint)
@@ -267,7 +267,7 @@ def test_the_first_transport_run_still_evaluates(capsys):
   best = os.path.join(os.path.dirname(__file__), '..', 'results',
                       'transport_hrl_n4_s0', 'checkpoints', 'best')
   evaluate.main(['--checkpoint', best, '--episodes', '1', '--envs', '1'])
-  assert 'iteration 4115' in capsys.readouterr().out
+  assert 'update 4115' in capsys.readouterr().out
 
 
 @pytest.fixture(scope='module')
@@ -339,7 +339,7 @@ def test_resume_at_another_batch_size_keeps_the_step_budget(controller,
                                                              tmp_path):
   logdir = tmp_path / 'run'
   learner_loop.train(_args(logdir, controller, total_steps=2 * STEPS))
-  # One copy instead of two: half the steps per iteration; 16 steps left.
+  # One copy instead of two: half the steps per update; 16 steps left.
   learner_loop.train(_args(logdir, controller, total_steps=3 * STEPS,
                            envs_per_actor=1, resume=True))
   rows = _rows(logdir)

@@ -2,7 +2,7 @@
 
 The object holds no parameters: `init(key)` makes them and `unroll` / `step`
 are pure functions of `(params, carry, inputs)`, so the learner can jit and
-differentiate through them and an actor can run any parameter version.
+differentiate through them and an actor can run any update's parameters.
 `step` *is* `unroll` on a length-1 sequence: the actor and the learner's
 replay of a stored sequence compute the same function.
 

@@ -6,21 +6,22 @@
     env = lowlevel.CommandWrapper(coop_suite.load('transport', 4),
                                   controller, command_period=0.5)
 
+paradigms.py   PARADIGMS: position / velocity, their task and command key.
 controller.py  Controller (deterministic, jit-compiled), files / load_from.
 wrapper.py     CommandWrapper: per-agent commands instead of joint actions.
+
+Only `paradigms` is imported with the package; the rest (JAX, MuJoCo) when
+first used, so a CLI can check a paradigm without starting them.
 weights/       trained controllers, one folder per paradigm.
 """
 import os
 
-from agents.lowlevel.controller import Controller
-from agents.lowlevel.controller import files
-from agents.lowlevel.controller import load_from
-from agents.lowlevel.controller import PARADIGMS
+from agents.lowlevel.paradigms import PARADIGMS
 
 WEIGHTS_DIR = os.path.join(os.path.dirname(__file__), 'weights')
 
 
-def load(paradigm: str = 'position', directory: str = None) -> Controller:
+def load(paradigm: str = 'position', directory: str = None):
   """The controller shipped for `paradigm` ('position' or 'velocity').
 
   Args:
@@ -30,6 +31,7 @@ def load(paradigm: str = 'position', directory: str = None) -> Controller:
   if paradigm not in PARADIGMS:
     raise ValueError(f'Unknown paradigm {paradigm!r}; expected one of '
                      f'{sorted(PARADIGMS)}.')
+  from agents.lowlevel.controller import load_from  # pylint: disable=g-import-not-at-top
   controller = load_from(directory or os.path.join(WEIGHTS_DIR, paradigm))
   if controller.paradigm != paradigm:
     raise ValueError(f'{directory} holds a {controller.paradigm!r} '
@@ -38,7 +40,10 @@ def load(paradigm: str = 'position', directory: str = None) -> Controller:
 
 
 def __getattr__(name):
-  # The wrapper imports coop_suite; keep `load` usable without it.
+  # Imported when first used (see the module docstring).
+  if name in ('Controller', 'files', 'load_from'):
+    from agents.lowlevel import controller  # pylint: disable=g-import-not-at-top
+    return getattr(controller, name)
   if name == 'CommandWrapper':
     from agents.lowlevel.wrapper import CommandWrapper  # pylint: disable=g-import-not-at-top
     return CommandWrapper

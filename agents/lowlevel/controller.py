@@ -27,12 +27,11 @@ import numpy as np
 
 from agents import normalization
 from agents import observations as obs_lib
+from agents.lowlevel.paradigms import PARADIGMS
 from agents.networks import policy_value
 from agents.ppo import config as ppo_config
 
 FORMAT = 1
-PARADIGMS = {'position': 'command/target', 'velocity': 'command/velocity'}
-"""Paradigm -> the command key its controller reads."""
 
 _FILES = ('params.msgpack', 'normalizer.npz', 'config.json')
 
@@ -110,7 +109,7 @@ class Controller:
 
   @property
   def command_key(self) -> str:
-    return PARADIGMS[self.paradigm]
+    return PARADIGMS[self.paradigm].command_key
 
   def __call__(self, observation: Mapping[str, np.ndarray]) -> np.ndarray:
     """One agent's observation dict -> action [8] float32 in [-1, 1]."""

@@ -3,7 +3,7 @@
 Acme / Brax style: the networks object holds no parameters. `init(key)` creates
 them and every other field is a pure function of `(params, inputs)`, so the
 learner can `jax.jit` and `jax.grad` through them and an actor can run them
-with any parameter version it pulled.
+with any update's parameters it pulled.
 
 Observations arrive already normalised (see `agents.normalization`); shapes
 are [..., obs_dim] with any leading axes ([B], [T, B], ...).

@@ -49,8 +49,8 @@ class TrainingState(NamedTuple):
     value_normalizer: [1]-dimensional statistics of the value targets, which
       the critic predicts standardised (never updated without
       `normalize_values`).
-    update: number of updates done, int32 scalar (the version of the
-      parameters that actors act with).
+    update: number of updates done, int32 scalar (runners name the
+      variables actors act with by it).
     key: PRNG key (raw uint32 [2]) for shuffling and entropy estimates.
   """
   params: Any

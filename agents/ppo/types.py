@@ -14,7 +14,7 @@ import numpy as np
 
 
 class SequenceBatch(NamedTuple):
-  """T steps of B rows, collected with one parameter version.
+  """T steps of B rows, collected with one update's parameters.
 
   Attributes:
     observation: [T + 1, B, D] raw (unnormalised) observations. The last row
