@@ -21,14 +21,12 @@ needs.
 import dataclasses
 import hashlib
 import os
-import tempfile
 from typing import Any, Callable, Mapping, Optional
 
 import numpy as np
 
 from agents import observations as obs_lib
 
-CONTROLLER_FILES = ('params.msgpack', 'normalizer.npz', 'config.json')
 _CONTROLLERS = {}  # Per process: files digest -> Controller (one jit each).
 
 
@@ -47,31 +45,25 @@ def read_controller(paradigm: str, directory: str = '') -> dict[str, bytes]:
     FileNotFoundError: no controller there, with how to make one.
   """
   from agents import lowlevel  # pylint: disable=g-import-not-at-top
+  from agents.lowlevel import controller as controller_lib  # pylint: disable=g-import-not-at-top
   directory = directory or os.path.join(lowlevel.WEIGHTS_DIR, paradigm)
   try:
-    lowlevel.load(paradigm, directory)
+    lowlevel.load(paradigm, directory)  # Checks it whole.
   except FileNotFoundError as e:
     raise FileNotFoundError(
         f'No trained {paradigm}-paradigm lower layer in {directory} ({e}). '
         f'Train one with `coop-pretrain-lowlevel --paradigm {paradigm}` and '
         f'export it there, or pass --controller DIR.') from None
-  contents = {}
-  for name in CONTROLLER_FILES:
-    with open(os.path.join(directory, name), 'rb') as f:
-      contents[name] = f.read()
-  return contents
+  return controller_lib.read_files(directory)
 
 
 def controller_from_files(files: Mapping[str, bytes]):
   """The `agents.lowlevel.Controller` in `files`, loaded once per process."""
-  digest = hashlib.sha1(b''.join(files[n] for n in CONTROLLER_FILES)).digest()
+  from agents.lowlevel import controller as controller_lib  # pylint: disable=g-import-not-at-top
+  digest = hashlib.sha1(b''.join(files[n] for n in controller_lib.FILES)
+                        ).digest()
   if digest not in _CONTROLLERS:
-    from agents.lowlevel import controller as controller_lib  # pylint: disable=g-import-not-at-top
-    with tempfile.TemporaryDirectory() as directory:
-      for name, data in files.items():
-        with open(os.path.join(directory, name), 'wb') as f:
-          f.write(data)
-      _CONTROLLERS[digest] = controller_lib.load_from(directory)
+    _CONTROLLERS[digest] = controller_lib.from_files(files)
   return _CONTROLLERS[digest]
 
 

@@ -20,6 +20,7 @@ from agents.lowlevel import controller as controller_lib
 from runners import checkpoints
 from runners import cli
 from runners import config as config_lib
+from runners import envs as envs_lib
 from runners import evaluate
 from runners import pretrain_locomotion
 from runners import run_dir
@@ -363,9 +364,17 @@ def test_command_wrapper_velocity_paradigm(controller, tmp_path):
   config['paradigm'] = 'velocity'
   config['observation_keys'] = [k.replace('command/target', 'command/velocity')
                                 for k in controller.observation_keys]
-  run_dir.write_directory(str(tmp_path), controller_lib.files(
-      controller.params, controller.normalizer, config))
+  files = controller_lib.files(controller.params, controller.normalizer,
+                               config)
+  run_dir.write_directory(str(tmp_path), files)
   velocity = lowlevel.load('velocity', str(tmp_path))
+  # The bytes a run carries load as the directory does (no directory).
+  assert controller_lib.read_files(str(tmp_path)) == files
+  from_bytes = controller_lib.from_files(files)
+  flat = np.linspace(-1, 1, velocity.observation_size)[None]
+  np.testing.assert_array_equal(from_bytes.act(flat), velocity.act(flat))
+  with pytest.raises(ValueError, match='not .position.'):
+    envs_lib.read_controller('position', str(tmp_path))
   recorder = _Recorder(velocity)
   env = lowlevel.CommandWrapper(coop_suite.load('corridor', 2, seed=0),
                                 recorder, command_period=0.1)

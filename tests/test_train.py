@@ -153,7 +153,7 @@ def test_checkpoints_keep_the_newest_and_resume_continues(controller, hrl_run,
   assert state['args']['total_steps'] == 5 * STEPS
   # The run's lower layer travels with it.
   assert sorted(os.listdir(os.path.join(logdir, 'controller'))) == sorted(
-      envs_lib.CONTROLLER_FILES)
+      controller_lib.FILES)
 
 
 def test_best_checkpoint_holds_the_best_full_window(controller, tmp_path,

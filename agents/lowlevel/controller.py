@@ -33,7 +33,8 @@ from agents.ppo import config as ppo_config
 
 FORMAT = 1
 
-_FILES = ('params.msgpack', 'normalizer.npz', 'config.json')
+FILES = ('params.msgpack', 'normalizer.npz', 'config.json')
+"""A controller's files, as `files` writes them and `from_files` reads them."""
 
 
 def files(policy_params: Any, normalizer: normalization.NormalizerState,
@@ -140,25 +141,43 @@ class Controller:
     return np.asarray(self._act(self.params, self.normalizer, flat))
 
 
-def load_from(directory: str) -> Controller:
-  """Reads a controller's directory (`files`)."""
-  missing = [f for f in _FILES
+def read_files(directory: str) -> dict[str, bytes]:
+  """The contents of a controller's directory, {file name: bytes}.
+
+  Raises:
+    FileNotFoundError: a file of `FILES` is missing.
+  """
+  missing = [f for f in FILES
              if not os.path.exists(os.path.join(directory, f))]
   if missing:
     raise FileNotFoundError(f'No controller in {directory!r}: missing '
                             f'{missing}.')
-  with open(os.path.join(directory, 'config.json')) as f:
-    config = json.load(f)
+  contents = {}
+  for name in FILES:
+    with open(os.path.join(directory, name), 'rb') as f:
+      contents[name] = f.read()
+  return contents
+
+
+def load_from(directory: str) -> Controller:
+  """Reads a controller's directory (`files`)."""
+  return from_files(read_files(directory), where=directory)
+
+
+def from_files(contents: Mapping[str, bytes], where: str = 'the files'
+               ) -> Controller:
+  """The controller in {file name: bytes} (the inverse of `files`);
+  `where` names them in errors."""
+  config = json.loads(contents['config.json'])
   if config.get('format') != FORMAT:
-    raise ValueError(f'{directory} holds controller format '
+    raise ValueError(f'{where} holds controller format '
                      f'{config.get("format")}, expected {FORMAT}.')
   if config['paradigm'] not in PARADIGMS:
     raise ValueError(f'Unknown paradigm {config["paradigm"]!r} in '
-                     f'{directory}; expected one of {sorted(PARADIGMS)}.')
-  with open(os.path.join(directory, 'params.msgpack'), 'rb') as f:
-    params = serialization.msgpack_restore(f.read())
-  params = jax.tree.map(jnp.asarray, params)
-  with np.load(os.path.join(directory, 'normalizer.npz')) as arrays:
+                     f'{where}; expected one of {sorted(PARADIGMS)}.')
+  params = jax.tree.map(jnp.asarray, serialization.msgpack_restore(
+      contents['params.msgpack']))
+  with np.load(io.BytesIO(contents['normalizer.npz'])) as arrays:
     normalizer = normalization.from_dict(arrays)
   return Controller(paradigm=config['paradigm'],
                     observation_keys=tuple(config['observation_keys']),
