@@ -60,7 +60,7 @@ setuptools.setup(
     entry_points={
         "console_scripts": [
             "coop-video=runners.video:main",
-            "coop-pretrain-lowlevel=runners.pretrain_locomotion:main",
+            "coop-pretrain-lowlevel=runners.pretrain_lowlevel:main",
             "coop-train=runners.train:main",
             "coop-eval=runners.evaluate:main",
             "coop-paper=runners.paper:main",

@@ -3,7 +3,7 @@
     summary = learner_loop.train(TrainArgs(task='transport', n_agents=4))
 
 The one training loop: every variant, and the lower layer's pretraining
-(`agent='lowlevel'`, which `runners.pretrain_locomotion` sets up).
+(`agent='lowlevel'`, which `runners.pretrain_lowlevel` sets up).
 
 One update (number u):
   1. every species' variables (params, observation statistics) are fetched

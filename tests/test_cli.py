@@ -17,7 +17,7 @@ from runners import eval_lowlevel
 from runners import evaluate
 from runners import learner_loop
 from runners import paper
-from runners import pretrain_locomotion
+from runners import pretrain_lowlevel
 from runners import train
 from runners import video
 
@@ -28,7 +28,7 @@ _OLD_RUN = os.path.join(_ROOT, 'tests', 'data', 'flat_config_run')
 _OLD_STATE = os.path.join(_OLD_RUN, 'checkpoints', 'ckpt_00000659',
                           'state.json')
 _CLIS = (config_lib.TrainArgs, evaluate.EvalArgs, video.VideoArgs,
-         pretrain_locomotion.Args, eval_lowlevel.EvalArgs,
+         pretrain_lowlevel.Args, eval_lowlevel.EvalArgs,
          baselines.BaselineArgs, paper.PaperArgs)
 
 
@@ -100,7 +100,7 @@ def test_help_shows_every_flag_with_its_docstring(cls, capsys):
     (video.main, ['--policy', 'best', '--png', 'x.png'], '--policy'),
     (evaluate.main, ['--checkpoint', 'x', '--n-agents', '-2'],
      '--n-agents must be 0 (the training one), or >= 1, got -2.'),
-    (pretrain_locomotion.main, ['--discount', '2'], '--discount'),
+    (pretrain_lowlevel.main, ['--discount', '2'], '--discount'),
     (eval_lowlevel.main, ['--episodes', '0'], '--episodes'),
 ])
 def test_a_value_out_of_range_is_one_line_naming_the_flag(main, argv,

@@ -22,7 +22,7 @@ from runners import cli
 from runners import config as config_lib
 from runners import envs as envs_lib
 from runners import evaluate
-from runners import pretrain_locomotion
+from runners import pretrain_lowlevel
 from runners import run_dir
 
 # Ray starts processes with fork + exec, which JAX's fork warning cannot
@@ -61,11 +61,11 @@ def tiny_run(tmp_path_factory):
   to 3 with the copies in one Ray actor."""
   logdir = str(tmp_path_factory.mktemp('pretrain') / 'run')
   argv = ['--paradigm', 'position', '--logdir', logdir, *TINY]
-  pretrain_locomotion.main(argv + ['--total-steps', '128'])
+  pretrain_lowlevel.main(argv + ['--total-steps', '128'])
   with open(os.path.join(logdir, 'metrics.csv')) as f:
     first_rows = list(csv.DictReader(f))
   checkpoints_before = sorted(os.listdir(os.path.join(logdir, 'checkpoints')))
-  pretrain_locomotion.main(argv + ['--total-steps', '192', '--resume',
+  pretrain_lowlevel.main(argv + ['--total-steps', '192', '--resume',
                                    '--actors', '1'])
   return logdir, first_rows, checkpoints_before
 
@@ -122,20 +122,20 @@ def test_pretrain_refuses_what_it_cannot_continue(tiny_run, tmp_path,
            (['--export-only', '--logdir', str(old)], 'older coop-suite')]
   for more, match in cases:
     with pytest.raises(SystemExit) as exit_info:
-      pretrain_locomotion.main(argv + more)
+      pretrain_lowlevel.main(argv + more)
     assert exit_info.value.code == 2
     assert match in capsys.readouterr().err
   # One writer per run directory, as coop-train.
   with run_dir.RunLock(logdir):
     with pytest.raises(SystemExit):
-      pretrain_locomotion.main(argv + ['--resume', '--total-steps', '256'])
+      pretrain_lowlevel.main(argv + ['--resume', '--total-steps', '256'])
   assert 'being written by another run' in capsys.readouterr().err
 
 
 def test_export_only_writes_the_newest_checkpoints_policy(tiny_run,
                                                             tmp_path):
   logdir = tiny_run[0]
-  pretrain_locomotion.main(['--paradigm', 'position', '--logdir', logdir,
+  pretrain_lowlevel.main(['--paradigm', 'position', '--logdir', logdir,
                             '--export-only', '--export-dir', str(tmp_path)])
   with open(tmp_path / 'config.json') as f:
     training = json.load(f)['training']
@@ -156,7 +156,7 @@ def test_export_only_writes_the_newest_checkpoints_policy(tiny_run,
       rtol=1e-5, atol=1e-6)
   assert config.agent == 'lowlevel' and spec.task == 'walk_to_target'
   with pytest.raises(ValueError, match='velocity-paradigm'):
-    pretrain_locomotion.export(pretrain_locomotion.Args(
+    pretrain_lowlevel.export(pretrain_lowlevel.Args(
         paradigm='velocity', export_dir=str(tmp_path)),
                                checkpoints.resolve(logdir))
 
@@ -178,13 +178,13 @@ def test_the_documented_commands_parse():
               if line.startswith('coop-pretrain-lowlevel ')]
   assert len(commands) >= 4
   for argv in commands:
-    args = cli.parse(pretrain_locomotion.Args, argv)
+    args = cli.parse(pretrain_lowlevel.Args, argv)
     assert args.train_args().agent == 'lowlevel'
   # The coop-train run that the defaults stand for, as the page says.
   argv, = [line.split()[1:] for line in text.splitlines()
            if line.startswith('coop-train --task walk_to_target')]
   documented = cli.parse(config_lib.TrainArgs, argv + ['--logdir', 'x'])
-  expected = pretrain_locomotion.Args(logdir='x').train_args()
+  expected = pretrain_lowlevel.Args(logdir='x').train_args()
   assert documented == expected
 
 
@@ -395,19 +395,19 @@ def test_command_wrapper_velocity_paradigm(controller, tmp_path):
 def test_cli_documents_every_flag_from_field_docstrings(capsys):
   from runners import cli  # pylint: disable=g-import-not-at-top
   with pytest.raises(SystemExit):
-    cli.parse(pretrain_locomotion.Args, ['--help'])
+    cli.parse(pretrain_lowlevel.Args, ['--help'])
   help_text = ' '.join(capsys.readouterr().out.split())
-  for field in dataclasses.fields(pretrain_locomotion.Args):
+  for field in dataclasses.fields(pretrain_lowlevel.Args):
     assert '--' + field.name.replace('_', '-') in help_text
   assert 'Control steps per copy in one rollout' in help_text
   assert 'Rewards are multiplied by this inside PPO' in help_text
-  args = cli.parse(pretrain_locomotion.Args,
+  args = cli.parse(pretrain_lowlevel.Args,
                    ['--paradigm', 'velocity', '--flat-sizes', '32', '32',
                     '--no-progress'])
   assert args.flat_sizes == (32, 32) and not args.progress
   assert args.logdir == 'runs/lowlevel_velocity'
   with pytest.raises(ValueError, match='paradigm'):
-    pretrain_locomotion.Args(paradigm='running')
+    pretrain_lowlevel.Args(paradigm='running')
 
 
 def test_eval_lowlevel_reports_means_and_errors(tiny_run):
