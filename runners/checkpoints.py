@@ -12,6 +12,11 @@ One checkpoint is one orbax step, `<logdir>/checkpoints/<update>/`:
   metrics/    on the updates saved as a new best: the episode window's
               success and return
 
+A published result (`coop-paper`) keeps a policy checkpoint instead
+(`write_policy`): the same layout with each learner's parameters and
+statistics only and `policy_only` in the state; it evaluates and starts
+other runs (`--init-from`) but resumes nothing.
+
 One `orbax.checkpoint.CheckpointManager` writes them (`save`),
 synchronously: orbax writes a step under a temporary name and renames it
 into place when complete, so a kill at any instant leaves the whole
@@ -107,9 +112,33 @@ def save(logdir: str, learners: Mapping[str, Any], state: dict[str, Any],
     score: (success, return) of the episode window when this update is
       a new best (kept as the best until one scores higher), else None.
   """
+  saved = {name: learner.save() for name, learner in learners.items()}
+  path = _write(_directory(logdir), saved, state, keep, score)
+  _remove_legacy(logdir, keep, best=score is not None)
+  return path
+
+
+def write_policy(checkpoint: str, logdir: str) -> str:
+  """Writes the policy of `checkpoint` as `logdir`/checkpoints/<update>/, a
+  checkpoint of its own (what a published result keeps): each species'
+  `HANDED_ON` state (parameters and statistics, no optimiser: about a third
+  of the size) and the state marked `policy_only`. `coop-eval` and
+  `--init-from` read it; no run resumes from it (`restore` refuses)."""
+  from agents.ppo import learning  # pylint: disable=g-import-not-at-top
+  state = read_state(checkpoint)
+  saved = {s['name']: learning.handed_on(saved_learner(checkpoint, s['name']))
+           for s in state['species']}
+  return _write(_directory(logdir), saved, {**state, 'policy_only': True},
+                keep=1)
+
+
+def _write(directory: str, saved: Mapping[str, dict[str, Any]],
+           state: dict[str, Any], keep: int,
+           score: Optional[tuple[float, float]] = None) -> str:
+  """Writes {species: saved learner state} and `state` as the orbax step
+  `state['update']` of `directory`; returns its path."""
   import jax  # pylint: disable=g-import-not-at-top
   import orbax.checkpoint as ocp  # pylint: disable=g-import-not-at-top
-  saved = {name: learner.save() for name, learner in learners.items()}
   # Orbax stores no zero-size arrays; `checkpointing.from_state_dict` puts
   # them back from the learner's own state.
   arrays = {name: jax.tree.map(lambda a: None if np.size(a) == 0 else a,
@@ -121,12 +150,11 @@ def save(logdir: str, learners: Mapping[str, Any], state: dict[str, Any],
   if score is not None:
     metrics = {'success': score[0], 'return': score[1]}
   update = int(state['update'])
-  with _manager(_directory(logdir), keep) as manager, _orbax_quiet():
+  with _manager(directory, keep) as manager, _orbax_quiet():
     manager.save(update, metrics=metrics, force=True,
                  args=ocp.args.Composite(learners=ocp.args.PyTreeSave(arrays),
                                          state=ocp.args.JsonSave(state)))
-  _remove_legacy(logdir, keep, best=score is not None)
-  return os.path.join(_directory(logdir), str(update))
+  return os.path.join(directory, str(update))
 
 
 def discard_after(logdir: str, update: int) -> None:
@@ -291,8 +319,17 @@ def saved_learner(checkpoint: str, species: str) -> dict[str, Any]:
 
 
 def restore(checkpoint: str, learners: Mapping[str, Any]) -> dict[str, Any]:
-  """Restores every species' learner; returns the state dict."""
+  """Restores every species' learner; returns the state dict.
+
+  Raises:
+    ValueError: `checkpoint` holds a policy only (`write_policy`).
+  """
   state = read_state(checkpoint)
+  if state.get('policy_only'):
+    raise ValueError(
+        f'{checkpoint} holds a policy only (a published result, without '
+        'optimiser state), which no run resumes from: start a new run from '
+        'it with --init-from SPECIES=PATH.')
   for name, learner in learners.items():
     learner.restore(saved_learner(checkpoint, name),
                     source=f'{checkpoint} ({name})')

@@ -117,8 +117,12 @@ def load_model(path: str, args: EvalArgs):
                                      species.action_size,
                                      species.global_state_size)
     learner = builder.make_learner(networks)
-    learner.restore(checkpoints.saved_learner(checkpoint, species.name),
-                    source=f'{checkpoint} ({species.name})')
+    saved = checkpoints.saved_learner(checkpoint, species.name)
+    source = f'{checkpoint} ({species.name})'
+    if state.get('policy_only'):  # Parameters and statistics are all it has.
+      learner.initialize_from(saved, source=source)
+    else:
+      learner.restore(saved, source=source)
     models[species.name] = (species, builder, networks, learner)
   return spec, config, models, {**state, 'checkpoint': checkpoint}
 

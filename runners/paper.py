@@ -242,22 +242,27 @@ def evaluate_cell(cell: paper_plan.Cell, checkpoint: str, args: PaperArgs,
 def publish(cell: paper_plan.Cell, checkpoint: str,
             evaluations: dict[int, dict], args: PaperArgs) -> str:
   """Copies the small artifacts into `--results`/<cell>/, whole or not at
-  all: metrics.csv, the final checkpoint, the run's lower layer and the
+  all: metrics.csv, the final checkpoint's policy (parameters and
+  statistics, `checkpoints.write_policy`), the run's lower layer and the
   eval JSONs."""
   from runners import evaluate  # pylint: disable=g-import-not-at-top
   final = results_directory(cell, args)
   _copy_run(run_directory(cell, args), checkpoint, final, {
       EVAL_FILE.format(n): lambda path, figures=figures: evaluate.write_json(
-          path, figures) for n, figures in evaluations.items()})
+          path, figures) for n, figures in evaluations.items()},
+            policy_only=True)
   shutil.rmtree(partial_directory(cell, args), ignore_errors=True)
   return final
 
 
 def _copy_run(logdir: str, checkpoint: str, final: str,
-              extra: Optional[dict[str, Callable[[str], None]]] = None):
+              extra: Optional[dict[str, Callable[[str], None]]] = None,
+              policy_only: bool = False):
   """Writes `final` whole or not at all: `logdir`'s metrics.csv and lower
   layer and the one `checkpoint` (a run directory that coop-train can
-  resume), plus {file name: writer(path)} of `extra`."""
+  resume; with `policy_only`, its policy: `checkpoints.write_policy`), plus
+  {file name: writer(path)} of `extra`."""
+  from runners import checkpoints  # pylint: disable=g-import-not-at-top
   from runners import run_dir  # pylint: disable=g-import-not-at-top
   parent = os.path.dirname(final)
   os.makedirs(parent, exist_ok=True)
@@ -266,8 +271,11 @@ def _copy_run(logdir: str, checkpoint: str, final: str,
   shutil.rmtree(tmp, ignore_errors=True)
   os.makedirs(os.path.join(tmp, 'checkpoints'))
   shutil.copy2(os.path.join(logdir, 'metrics.csv'), tmp)
-  shutil.copytree(checkpoint, os.path.join(
-      tmp, 'checkpoints', os.path.basename(checkpoint)))
+  if policy_only:
+    checkpoints.write_policy(checkpoint, tmp)
+  else:
+    shutil.copytree(checkpoint, os.path.join(
+        tmp, 'checkpoints', os.path.basename(checkpoint)))
   if os.path.isdir(os.path.join(logdir, 'controller')):
     shutil.copytree(os.path.join(logdir, 'controller'),
                     os.path.join(tmp, 'controller'))

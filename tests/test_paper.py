@@ -177,10 +177,20 @@ def test_the_plan_skips_done_cells_and_resumes_a_partial_one(
             figures['episodes']) == (n, 2, 2 * STEPS, 2)
     marl_eval.check(figures['marl_eval'])
     assert list(figures['marl_eval']['coop_suite']) == [f'transport_n{n}']
-  # The committed copy evaluates on its own.
+  # The committed copy is the final checkpoint's policy: it evaluates on
+  # its own exactly as the run's checkpoint, and resumes nothing.
+  published = checkpoints.resolve(folder)
+  assert checkpoints.read_state(published)['policy_only']
+  assert 'opt_state' not in checkpoints.saved_learner(published,
+                                                      'ant')['state']
   out = evaluate.evaluate(evaluate.EvalArgs(checkpoint=(folder,), episodes=1,
                                             envs=1))
   assert out['models'][0]['update'] == 2
+  full = evaluate.evaluate(evaluate.EvalArgs(checkpoint=(logdir,),
+                                             episodes=1, envs=1))
+  assert out['models'][0]['episodes'] == full['models'][0]['episodes']
+  with pytest.raises(ValueError, match='policy only'):
+    checkpoints.restore(published, {})
   # Nothing left to do: nothing logged, and Ray not even started.
   monkeypatch.setattr(actor_pool, 'init_ray',
                       lambda *a, **k: pytest.fail('Ray started'))

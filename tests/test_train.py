@@ -306,6 +306,18 @@ def test_init_from_starts_each_species_from_its_stage_run(
     assert int(want.update) > 0 and int(got.update) == 0  # Fresh optimiser.
     jax.tree.map(np.testing.assert_array_equal, got.opt_state,
                  fresh[species].opt_state)
+  # A published result (the stage's policy only) hands on the same.
+  published = {s: str(tmp_path / f'published_{s}') for s in ravine_stages}
+  for species, run in ravine_stages.items():
+    checkpoints.write_policy(checkpoints.resolve(run), published[species])
+  from_policies = _joint_learners(args)
+  learner_loop.initialize_from_runs(dataclasses.replace(
+      args, init_from=tuple(f'{s}={d}' for s, d in published.items())),
+                                    from_policies)
+  for species in ravine_stages:
+    jax.tree.map(np.testing.assert_array_equal,
+                 jax.device_get(from_policies[species].state),
+                 jax.device_get(learners[species].state))
   # And through the whole run: it trains on from there.
   learner_loop.train(args)
   assert len(_rows(args.logdir)) == 2

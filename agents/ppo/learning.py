@@ -34,6 +34,18 @@ from agents.ppo import types
 # and 2, the feed-forward and hierarchy learners' own, named it `step`).
 _CHECKPOINT_FORMAT = 3
 _CHECKPOINT_KIND = 'ppo'
+HANDED_ON = ('params', 'normalizer', 'value_normalizer')
+"""The part of a training state another run starts from (a curriculum stage,
+`initialize_from`) and an evaluation needs; the rest (optimiser, update
+counter, key and the global-state statistics, whose size depends on the
+population) is training's own."""
+
+
+def handed_on(saved: dict[str, Any]) -> dict[str, Any]:
+  """A saved state (`PPOLearner.save`) with only its `HANDED_ON` part: what
+  a published result keeps (`initialize_from` reads it)."""
+  return {**saved, 'state': {name: value for name, value in
+                             saved['state'].items() if name in HANDED_ON}}
 
 
 class TrainingState(NamedTuple):
@@ -350,10 +362,7 @@ class PPOLearner(core.Learner):
     self._state = checkpointing.from_state_dict(
         source, self._state, self._state_dict(saved, source))
 
-  # What a curriculum stage hands on (`initialize_from`); the rest (optimiser,
-  # update counter, key and the global-state statistics, whose size depends
-  # on the population) starts fresh.
-  _HANDED_ON = ('params', 'normalizer', 'value_normalizer')
+  HANDED_ON = HANDED_ON
 
   def initialize_from(self, saved: dict[str, Any],
                       source: str = 'checkpoint') -> None:
@@ -366,7 +375,7 @@ class PPOLearner(core.Learner):
         differ from this learner's (naming `source`).
     """
     state_dict = self._state_dict(saved, source)
-    template = {name: getattr(self._state, name) for name in self._HANDED_ON}
+    template = {name: getattr(self._state, name) for name in HANDED_ON}
     loaded = checkpointing.from_state_dict(
-        source, template, {name: state_dict[name] for name in self._HANDED_ON})
+        source, template, {name: state_dict[name] for name in HANDED_ON})
     self._state = self._state._replace(**loaded)
