@@ -1,20 +1,52 @@
-"""Learning curves from a run's metrics.csv, as a PNG.
+"""Learning curves from runs' metrics.csv, as a PNG.
 
     python -m runners.plot runs/lowlevel_position --columns return success \
         --out docs/images/lowlevel_position.png
+    python -m runners.plot results/paper/transport_hrl_n4_s0 \
+        results/paper/transport_hrl_n4_s1 results/paper/transport_hrl_n4_s2 \
+        --columns success learner/ant/value_loss learner/ant/approx_kl \
+        learner/ant/action_std --out docs/images/transport_hrl_n4.png
 
-One panel per column against environment steps (and wall time on a second
-x axis label), so a figure in docs/ always comes from a run directory.
+One panel per column against environment steps, so a figure in docs/ always
+comes from run directories. One run: its curve. Several runs (the seeds of
+one cell): each run thin, their mean bold in a band of +- one standard error
+between the runs, over the steps that every run covers (each curve
+interpolated linearly at the union of the runs' logged steps).
 """
 
-import argparse
 import csv
+import dataclasses
 import os
+from typing import Annotated, Sequence, Union
 
 import matplotlib
+import numpy as np
+import tyro
+
+from runners import cli
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # pylint: disable=g-import-not-at-top
+
+
+@dataclasses.dataclass(frozen=True)
+class PlotArgs:
+  """What to plot (every field is a CLI flag; the runs are positional)."""
+
+  runs: Annotated[tuple[str, ...], tyro.conf.Positional]
+  """Run directories (or published results), each with a metrics.csv."""
+  out: str
+  """The PNG to write."""
+  columns: tuple[str, ...] = ("return", "success")
+  """metrics.csv columns, one panel each."""
+  title: str = ""
+  """Figure title; default: the runs' names and wall time."""
+
+  def __post_init__(self):
+    if not self.runs:
+      raise ValueError("Give at least one run directory.")
+    if not self.columns:
+      raise ValueError("--columns must name at least one column.")
 
 
 def read_metrics(run_dir):
@@ -33,27 +65,65 @@ def read_metrics(run_dir):
   return rows
 
 
-def plot(run_dir, columns, out, title=None):
-  """Writes one panel per column of `columns` against env steps to `out`."""
-  rows = read_metrics(run_dir)
-  if not rows:
-    raise ValueError(f"{run_dir}/metrics.csv has no rows.")
-  missing = [c for c in columns if not any(c in r for r in rows)]
-  if missing:
-    raise ValueError(f"Columns {missing} are not in {run_dir}/metrics.csv; "
-                     f"available: {sorted(rows[-1])}.")
+def _curve(rows, column):
+  """(env steps, values) of the rows that have `column`."""
+  points = np.array([(r["env_steps"], r[column]) for r in rows
+                     if column in r and "env_steps" in r], np.float64)
+  return points.reshape(-1, 2).T
+
+
+def mean_and_band(curves):
+  """(steps, mean, standard error) of several (steps, values) curves over
+  the steps that all of them cover; the standard error is 0 for one
+  curve."""
+  start = max(steps[0] for steps, _ in curves)
+  end = min(steps[-1] for steps, _ in curves)
+  grid = np.unique(np.concatenate([steps[(steps >= start) & (steps <= end)]
+                                   for steps, _ in curves]))
+  values = np.stack([np.interp(grid, steps, v) for steps, v in curves])
+  error = (values.std(0, ddof=1) / np.sqrt(len(curves)) if len(curves) > 1
+           else np.zeros_like(grid))
+  return grid, values.mean(0), error
+
+
+def plot(runs: Union[str, Sequence[str]], columns, out, title=None):
+  """Writes one panel per column of `columns` against env steps to `out`,
+  for one run directory or several (mean and band, see the module doc)."""
+  runs = [runs] if isinstance(runs, str) else list(runs)
+  all_rows = []
+  for run in runs:
+    rows = read_metrics(run)
+    if not rows:
+      raise ValueError(f"{run}/metrics.csv has no rows.")
+    missing = [c for c in columns if not any(c in r for r in rows)]
+    if missing:
+      raise ValueError(f"Columns {missing} are not in {run}/metrics.csv; "
+                       f"available: {sorted(rows[-1])}.")
+    all_rows.append(rows)
   fig, axes = plt.subplots(1, len(columns), figsize=(4.2 * len(columns), 3.2),
                            squeeze=False)
+  names = [os.path.basename(os.path.normpath(run)) for run in runs]
   for ax, column in zip(axes[0], columns):
-    points = [(r["env_steps"], r[column]) for r in rows
-              if column in r and "env_steps" in r]
-    ax.plot([p[0] / 1e6 for p in points], [p[1] for p in points], lw=1.2)
+    curves = [_curve(rows, column) for rows in all_rows]
+    if len(curves) == 1:
+      ax.plot(curves[0][0] / 1e6, curves[0][1], lw=1.2)
+    else:
+      for (steps, values), name in zip(curves, names):
+        ax.plot(steps / 1e6, values, lw=0.7, alpha=0.45, label=name)
+      steps, mean, error = mean_and_band(curves)
+      ax.plot(steps / 1e6, mean, lw=1.8, color="black", label="mean")
+      ax.fill_between(steps / 1e6, mean - error, mean + error, color="black",
+                      alpha=0.15, lw=0, label="+- s.e.")
     ax.set_xlabel("environment steps (millions)")
     ax.set_title(column)
     ax.grid(alpha=0.3)
-  wall = rows[-1].get("wall_time", 0.0) / 60
-  fig.suptitle(title or f"{os.path.basename(os.path.normpath(run_dir))} "
-               f"({wall:.0f} min wall time)")
+  if len(runs) > 1:
+    axes[0][0].legend(fontsize=7)
+  wall = np.mean([rows[-1].get("wall_time", 0.0) for rows in all_rows]) / 60
+  fig.suptitle(title or (
+      f"{names[0]} ({wall:.0f} min wall time)" if len(runs) == 1 else
+      f"mean +- s.e. of {len(runs)} runs (legend; {wall:.0f} min wall "
+      "time per run on average)"))
   fig.tight_layout()
   os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
   fig.savefig(out, dpi=100)
@@ -61,13 +131,12 @@ def plot(run_dir, columns, out, title=None):
 
 
 def main(argv=None):
-  parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-  parser.add_argument("run_dir")
-  parser.add_argument("--columns", nargs="+", default=["return", "success"])
-  parser.add_argument("--out", required=True)
-  parser.add_argument("--title", default=None)
-  args = parser.parse_args(argv)
-  plot(args.run_dir, args.columns, args.out, args.title)
+  args = cli.parse(PlotArgs, argv, description=__doc__.splitlines()[0],
+                   prog="python -m runners.plot")
+  try:
+    plot(args.runs, args.columns, args.out, args.title or None)
+  except cli.user_errors() as e:
+    cli.fail("python -m runners.plot", e)
   print(f"wrote {args.out}")
 
 

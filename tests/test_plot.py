@@ -1,19 +1,49 @@
-"""Learning-curve PNGs come from a run directory's metrics.csv."""
+"""Learning-curve PNGs come from run directories' metrics.csv."""
 
 import imageio
+import numpy as np
 import pytest
 
 from runners import plot
 
 
+def _run(path, rows):
+  path.mkdir()
+  (path / "metrics.csv").write_text(
+      "update,env_steps,wall_time,return,success\n" + "".join(
+          f"{i + 1},{steps},{i + 1.0},{ret},{success}\n"
+          for i, (steps, ret, success) in enumerate(rows)))
+  return str(path)
+
+
 def test_plot_writes_a_png_and_names_missing_columns(tmp_path):
-  run = tmp_path / "run"
-  run.mkdir()
-  (run / "metrics.csv").write_text(
-      "update,env_steps,wall_time,return,success\n"
-      "1,1000,1.0,10.0,0.0\n2,2000,2.0,,0.5\n3,3000,3.0,30.0,1.0\n")
+  run = _run(tmp_path / "run", [(1000, 10.0, 0.0), (2000, "", 0.5),
+                                (3000, 30.0, 1.0)])
   out = tmp_path / "curve.png"
-  plot.main([str(run), "--columns", "return", "success", "--out", str(out)])
+  plot.main([run, "--columns", "return", "success", "--out", str(out)])
   assert imageio.v2.imread(out).ndim == 3
   with pytest.raises(ValueError, match="available"):
-    plot.plot(str(run), ["nope"], str(out))
+    plot.plot(run, ["nope"], str(out))
+
+
+def test_several_runs_give_their_mean_and_band(tmp_path, capsys):
+  a = _run(tmp_path / "s0", [(1000, 0.0, 0.0), (2000, 2.0, 0.5),
+                             (3000, 4.0, 1.0)])
+  b = _run(tmp_path / "s1", [(1500, 1.5, 0.0), (2500, 3.5, 1.0)])
+  steps, mean, error = plot.mean_and_band([plot._curve(plot.read_metrics(r),  # pylint: disable=protected-access
+                                                       "return")
+                                           for r in (a, b)])
+  # Where both runs have data, at both runs' steps, interpolated.
+  np.testing.assert_allclose(steps, [1500, 2000, 2500])
+  a_at = np.array([1.0, 2.0, 3.0])
+  b_at = np.array([1.5, 2.5, 3.5])
+  np.testing.assert_allclose(mean, (a_at + b_at) / 2)
+  np.testing.assert_allclose(error, np.std([a_at, b_at], 0, ddof=1)
+                             / np.sqrt(2))
+  out = tmp_path / "seeds.png"
+  plot.main([a, b, "--columns", "success", "--out", str(out)])
+  assert imageio.v2.imread(out).ndim == 3 and "wrote" in capsys.readouterr().out
+  with pytest.raises(SystemExit) as exit_info:
+    plot.main([a, str(tmp_path / "missing"), "--out", str(out)])
+  assert exit_info.value.code == 2
+  assert "runners.plot: error" in capsys.readouterr().err
