@@ -155,12 +155,13 @@ def pipeline(args, actors, logdir):
   rows = []
   train_args = _train_args(args, actors, logdir)
   per_update = (actors * args.envs_per_actor
-                   * train_args.hierarchy.sequence_length
-                   * round(train_args.command_period / 0.05))
+                * train_args.hierarchy.sequence_length
+                * round(train_args.command_period / 0.05))
   train_args = dataclasses.replace(
       train_args, total_steps=per_update * args.updates)
-  learner_loop.train(train_args,
-                     on_update=lambda u, row, pool: rows.append(row))
+  # The callback by position: older commits (the "before" figures of
+  # docs/performance.md) name the parameter on_iteration.
+  learner_loop.train(train_args, lambda u, row, pool: rows.append(row))
   rows = rows[1:]  # Without the first update.
   steps = sum(r['sps'] * (r['time/collect'] + r['time/learn']) for r in rows)
   seconds = sum(r['time/collect'] + r['time/learn'] for r in rows)

@@ -123,13 +123,32 @@ def write_policy(checkpoint: str, logdir: str) -> str:
   checkpoint of its own (what a published result keeps): each species'
   `HANDED_ON` state (parameters and statistics, no optimiser: about a third
   of the size) and the state marked `policy_only`. `coop-eval` and
-  `--init-from` read it; no run resumes from it (`restore` refuses)."""
+  `--init-from` read it; no run resumes from it (`restore` refuses).
+
+  Raises:
+    ValueError: `checkpoint` is not `policy_writable` (copy it whole).
+  """
   from agents.ppo import learning  # pylint: disable=g-import-not-at-top
+  if not policy_writable(checkpoint):
+    raise ValueError(f'{checkpoint} is from before orbax or holds learner '
+                     'states of an older format: copy it whole.')
   state = read_state(checkpoint)
   saved = {s['name']: learning.handed_on(saved_learner(checkpoint, s['name']))
            for s in state['species']}
   return _write(_directory(logdir), saved, {**state, 'policy_only': True},
                 keep=1)
+
+
+def policy_writable(checkpoint: str) -> bool:
+  """Whether `write_policy` can write `checkpoint`'s policy: an orbax step
+  whose learners are all in today's format (older ones are read through
+  their learner's upgrade, which only a built learner can do)."""
+  from agents.ppo import learning  # pylint: disable=g-import-not-at-top
+  if not _is_step(checkpoint):
+    return False
+  learners = read_state(checkpoint).get('learners', {})
+  return all(entry.get('format') == learning.CHECKPOINT_FORMAT
+             and entry.get('kind') for entry in learners.values())
 
 
 def _write(directory: str, saved: Mapping[str, dict[str, Any]],
@@ -325,15 +344,21 @@ def restore(checkpoint: str, learners: Mapping[str, Any]) -> dict[str, Any]:
     ValueError: `checkpoint` holds a policy only (`write_policy`).
   """
   state = read_state(checkpoint)
+  check_resumable(checkpoint, state)
+  for name, learner in learners.items():
+    learner.restore(saved_learner(checkpoint, name),
+                    source=f'{checkpoint} ({name})')
+  return state
+
+
+def check_resumable(checkpoint: str, state: dict[str, Any]) -> None:
+  """Raises ValueError if `checkpoint` (whose state is `state`) holds a
+  policy only (`write_policy`), which no run resumes from."""
   if state.get('policy_only'):
     raise ValueError(
         f'{checkpoint} holds a policy only (a published result, without '
         'optimiser state), which no run resumes from: start a new run from '
         'it with --init-from SPECIES=PATH.')
-  for name, learner in learners.items():
-    learner.restore(saved_learner(checkpoint, name),
-                    source=f'{checkpoint} ({name})')
-  return state
 
 
 def run_directory(checkpoint: str) -> str:

@@ -86,7 +86,8 @@ def evaluate(args: EvalArgs) -> dict:
   options = {'resample_on_reach': False} if args.paradigm == 'position' else {}
   rows = []
   for episode in range(args.episodes):
-    env = coop_suite.load(PARADIGMS[args.paradigm].task, 1, seed=args.seed + episode,
+    env = coop_suite.load(PARADIGMS[args.paradigm].task, 1,
+                          seed=args.seed + episode,
                           time_limit=args.time_limit, **options)
     timestep = env.reset()
     reached_at = None

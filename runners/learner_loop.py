@@ -57,6 +57,7 @@ def check_run_directory(args: config_lib.TrainArgs) -> Optional[str]:
     checkpoint = checkpoints.resolve(args.logdir)
   if args.resume:
     saved = checkpoints.read_state(checkpoint)
+    checkpoints.check_resumable(checkpoint, saved)
     config_lib.check_resumable(saved['args'], args)
     return checkpoint
   if checkpoints.list_checkpoints(args.logdir) or os.path.exists(

@@ -76,8 +76,13 @@ def mean_and_band(curves):
   """(steps, mean, standard error) of several (steps, values) curves over
   the steps that all of them cover; the standard error is 0 for one
   curve."""
+  if any(len(steps) == 0 for steps, _ in curves):
+    raise ValueError("A run has no logged value of this column.")
   start = max(steps[0] for steps, _ in curves)
   end = min(steps[-1] for steps, _ in curves)
+  if start > end:
+    raise ValueError(f"The runs cover no common environment steps (from "
+                     f"{start:g} to {end:g}): give runs of one cell.")
   grid = np.unique(np.concatenate([steps[(steps >= start) & (steps <= end)]
                                    for steps, _ in curves]))
   values = np.stack([np.interp(grid, steps, v) for steps, v in curves])

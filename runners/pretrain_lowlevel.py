@@ -16,7 +16,7 @@ the flags given here; `--num-envs` (all copies) is this command's own.
 
 At the end (also after Ctrl-C / SIGTERM, which stop after the current update
 with a checkpoint) the policy of the newest checkpoint is exported as a
-controller (`agents.lowlevel.save`) into `--export-dir` (default
+controller (`agents.lowlevel.files`) into `--export-dir` (default
 `<logdir>/controller`); `--export-only` exports it without training.
 
 Position paradigm: `walk_to_target` (reward 5/(1+d) to a target 2-6 m away,

@@ -5,6 +5,8 @@ import dataclasses
 import json
 import os
 import shutil
+import subprocess
+import sys
 
 import pytest
 
@@ -169,3 +171,14 @@ def test_an_old_flat_config_loads_resumes_and_evaluates(tmp_path):
       run, evaluate.EvalArgs(checkpoint=(run,), n_agents=2))
   assert spec.n_agents == 2 and config == args.hierarchy
   assert set(models) == {'ant'}
+
+
+def test_the_clis_check_their_flags_without_jax_or_mujoco():
+  """Argument classes import light: --help and bad flags answer at once."""
+  code = ('import sys; import runners.config, runners.pretrain_lowlevel, '
+          'runners.eval_lowlevel, agents.lowlevel; '
+          'print(sorted(m for m in ("jax", "mujoco", "dm_control") '
+          'if m in sys.modules))')
+  out = subprocess.run([sys.executable, '-c', code], check=True,
+                       capture_output=True, text=True, cwd=_ROOT).stdout
+  assert out.strip() == '[]'

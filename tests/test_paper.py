@@ -189,6 +189,10 @@ def test_the_plan_skips_done_cells_and_resumes_a_partial_one(
   full = evaluate.evaluate(evaluate.EvalArgs(checkpoint=(logdir,),
                                              episodes=1, envs=1))
   assert out['models'][0]['episodes'] == full['models'][0]['episodes']
+  zero_shot = [evaluate.evaluate(evaluate.EvalArgs(
+      checkpoint=(path,), episodes=1, envs=1, n_agents=3))['models'][0]
+               for path in (folder, logdir)]
+  assert zero_shot[0]['episodes'] == zero_shot[1]['episodes']
   with pytest.raises(ValueError, match='policy only'):
     checkpoints.restore(published, {})
   # Nothing left to do: nothing logged, and Ray not even started.

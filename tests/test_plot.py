@@ -40,6 +40,9 @@ def test_several_runs_give_their_mean_and_band(tmp_path, capsys):
   np.testing.assert_allclose(mean, (a_at + b_at) / 2)
   np.testing.assert_allclose(error, np.std([a_at, b_at], 0, ddof=1)
                              / np.sqrt(2))
+  late = _run(tmp_path / "late", [(5000, 1.0, 0.0), (6000, 2.0, 0.0)])
+  with pytest.raises(ValueError, match="no common"):
+    plot.plot([a, late], ["return"], str(tmp_path / "none.png"))
   out = tmp_path / "seeds.png"
   plot.main([a, b, "--columns", "success", "--out", str(out)])
   assert imageio.v2.imread(out).ndim == 3 and "wrote" in capsys.readouterr().out

@@ -7,12 +7,13 @@
                                   controller, command_period=0.5)
 
 paradigms.py   PARADIGMS: position / velocity, their task and command key.
-controller.py  Controller (deterministic, jit-compiled), files / load_from.
+controller.py  Controller (deterministic, jit-compiled); FILES, files /
+               from_files, read_files / load_from.
 wrapper.py     CommandWrapper: per-agent commands instead of joint actions.
+weights/       trained controllers, one folder per paradigm.
 
 Only `paradigms` is imported with the package; the rest (JAX, MuJoCo) when
 first used, so a CLI can check a paradigm without starting them.
-weights/       trained controllers, one folder per paradigm.
 """
 import os
 
@@ -41,7 +42,8 @@ def load(paradigm: str = 'position', directory: str = None):
 
 def __getattr__(name):
   # Imported when first used (see the module docstring).
-  if name in ('Controller', 'files', 'load_from'):
+  if name in ('Controller', 'FILES', 'files', 'from_files', 'load_from',
+              'read_files'):
     from agents.lowlevel import controller  # pylint: disable=g-import-not-at-top
     return getattr(controller, name)
   if name == 'CommandWrapper':

@@ -168,6 +168,9 @@ def from_files(contents: Mapping[str, bytes], where: str = 'the files'
                ) -> Controller:
   """The controller in {file name: bytes} (the inverse of `files`);
   `where` names them in errors."""
+  missing = [name for name in FILES if name not in contents]
+  if missing:
+    raise ValueError(f'{where} lack the controller files {missing}.')
   config = json.loads(contents['config.json'])
   if config.get('format') != FORMAT:
     raise ValueError(f'{where} holds controller format '

@@ -32,7 +32,7 @@ from agents.ppo import types
 
 # 3: one state for every PPO learner, its counter named `update` (formats 1
 # and 2, the feed-forward and hierarchy learners' own, named it `step`).
-_CHECKPOINT_FORMAT = 3
+CHECKPOINT_FORMAT = 3
 _CHECKPOINT_KIND = 'ppo'
 HANDED_ON = ('params', 'normalizer', 'value_normalizer')
 """The part of a training state another run starts from (a curriculum stage,
@@ -327,7 +327,7 @@ class PPOLearner(core.Learner):
     """The full training state (params, optimiser, statistics, update
     counter, PRNG key) as a saved state of host arrays."""
     return checkpointing.saved_state(self._state, self.checkpoint_kind,
-                                     _CHECKPOINT_FORMAT)
+                                     CHECKPOINT_FORMAT)
 
   def _upgrade(self, file_format: int,
                state_dict: dict[str, Any]) -> dict[str, Any]:
@@ -342,12 +342,12 @@ class PPOLearner(core.Learner):
     """The state dict of a saved state, in today's layout."""
     file_format, state_dict = checkpointing.unpack(
         saved, self.checkpoint_kind, source)
-    if file_format != _CHECKPOINT_FORMAT:
+    if file_format != CHECKPOINT_FORMAT:
       if file_format not in self.older_formats:
         raise ValueError(
             f'{source} is a {self.checkpoint_kind} checkpoint of format '
             f'{file_format}; this version reads formats '
-            f'{[*self.older_formats, _CHECKPOINT_FORMAT]}.')
+            f'{[*self.older_formats, CHECKPOINT_FORMAT]}.')
       state_dict = self._upgrade(file_format, state_dict)
       if 'step' in state_dict:
         state_dict = {**state_dict, 'update': state_dict['step']}
