@@ -58,6 +58,10 @@ class PaperArgs:
   json: str = ''
   """With --report: also write every evaluation in marl-eval's JSON layout
   to this file."""
+  figures: str = ''
+  """With --report: also draw the learning curves of the committed cells
+  (training success and return, mean +- s.e. over each configuration's
+  models) as PNGs into this folder, linked from the tables' text."""
   results: str = 'results/paper'
   """Committed results: one folder per done cell."""
   runs: str = 'runs/paper'

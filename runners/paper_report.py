@@ -5,7 +5,9 @@ no simulation) and `--baselines` (the difficulty references), and writes
 markdown: per table, our success rate +- standard error over all models x
 episodes, the spread between models (standard error of the per-model
 rates), how many of the declared models are in, the paper's figure and the
-greedy and oracle references beside; then each cell's command.
+greedy and oracle references beside; with `--figures`, the learning
+curves of the committed cells (their metrics.csv) as PNGs, linked; then
+each cell's command.
 """
 import csv
 import json
@@ -23,6 +25,8 @@ INTRODUCTION = ('The plan of docs/paper.md, regenerated from the committed '
                 'docs/results.md`.')
 SCALING_SEEDS = 3
 """Fig. 4a's models per population."""
+FIGURE_COLUMNS = ('success', 'return')
+"""What the learning-curve figures show (training windows of metrics.csv)."""
 BEGIN, END = '<!-- paper:begin -->', '<!-- paper:end -->'
 
 
@@ -117,6 +121,55 @@ def _models(plan, experiment, task, agent, n_agents):
           (experiment, task, agent, n_agents) and not c.stage]
 
 
+def _scaling_models(plan) -> dict[int, list[paper_plan.Cell]]:
+  """Fig. 4a's cells per training population (4 Ants: Table 1's first
+  `SCALING_SEEDS` models), populations without cells left out."""
+  scaling = {n: _models(plan, 'scaling', 'transport', 'hrl', n) or [
+      c for c in _models(plan, 'table1', 'transport', 'hrl', n)
+      if c.seed < SCALING_SEEDS] for n in paper_plan.POPULATIONS}
+  return {n: cells for n, cells in scaling.items() if cells}
+
+
+def figures(args: paper.PaperArgs, plan, directory: str
+            ) -> list[tuple[str, str]]:
+  """Draws the learning curves of the committed cells into `directory`;
+  returns (caption, path) of each figure drawn (none without results).
+
+  Table 1, per task: each variant's models; Fig. 4a: transport by training
+  population; Fig. 4b, c: IPPO against MAPPO on the corridor with 6 and 7
+  Ants. Each line is the mean of a configuration's models in a band of +-
+  one standard error (`plot.plot_groups`).
+  """
+  from runners import plot  # pylint: disable=g-import-not-at-top (matplotlib)
+  done = lambda cells: [paper.results_directory(c, args) for c in cells  # pylint: disable=g-long-lambda
+                        if paper.is_done(c, args)]
+  specs = []
+  for task, n in paper_plan.TABLE1_TASKS:
+    specs.append((f'table1_{task}.png', f'Table 1, {task} with {n} '
+                  f'{baselines.population_unit(task)}: training windows',
+                  {paper_plan.VARIANT_NAMES[a]: done(_models(
+                      plan, 'table1', task, a, n))
+                   for a in ('hrl', 'no_memory', 'flat')}))
+  specs.append(('fig4a_transport_populations.png',
+                'Fig. 4a, transport by training population',
+                {f'{n} Ants': done(cells)
+                 for n, cells in _scaling_models(plan).items()}))
+  for n in (6, 7):
+    specs.append((f'fig4_corridor_n{n}.png',
+                  f'Fig. 4b, c, corridor with {n} Ants: IPPO against MAPPO',
+                  {name: done(_models(plan, 'mappo', 'corridor', a, n))
+                   for a, name in (('hrl', 'IPPO (hrl)'),
+                                   ('mappo', 'MAPPO'))}))
+  drawn = []
+  for name, caption, groups in specs:
+    groups = {label: runs for label, runs in groups.items() if runs}
+    if groups:
+      path = os.path.join(directory, name)
+      plot.plot_groups(groups, FIGURE_COLUMNS, path, caption)
+      drawn.append((caption, path))
+  return drawn
+
+
 def report(args: paper.PaperArgs, plan=None) -> str:
   """The markdown tables (and commands) of the plan's committed results."""
   plan = paper.selected(args, plan)
@@ -161,6 +214,17 @@ def report(args: paper.PaperArgs, plan=None) -> str:
                            *refs(task, n)]))
     lines.append('')
   lines += _curves_tables(plan, args, columns, refs)
+  drawn = figures(args, plan, args.figures) if args.figures else []
+  if drawn:
+    # Links relative to the page the tables go into.
+    base = os.path.dirname(os.path.abspath(args.docs)) if args.docs else '.'
+    lines += ['### Learning curves', '',
+              'Training success and return (windows of 100 episodes in each '
+              "model's metrics.csv) against environment steps: the mean of "
+              "a configuration's models in a band of +- one standard error; "
+              'the legend gives how many models.', '']
+    for caption, path in drawn:
+      lines += [f'![{caption}]({os.path.relpath(path, base)})', '']
   lines += ['### Commands', '',
             f'Each cell: `coop-paper --only <path>` runs the command below, '
             f'then `coop-eval --checkpoint {args.results}/<cell> --episodes '
@@ -196,10 +260,7 @@ def _curves_tables(plan, args, columns, refs) -> list[str]:
                          _ours(summary, 'return')[0],
                          *refs('corridor', n)]))
     lines.append('')
-  scaling = {n: _models(plan, 'scaling', 'transport', 'hrl', n) or [
-      c for c in _models(plan, 'table1', 'transport', 'hrl', n)
-      if c.seed < SCALING_SEEDS] for n in paper_plan.POPULATIONS}
-  scaling = {n: cells for n, cells in scaling.items() if cells}
+  scaling = _scaling_models(plan)
   if scaling:
     lines += ['### Transport trained with 2-5 Ants (Fig. 4a)', '',
               f'Paper: {paper_plan.PAPER_FIGURE4["scaling"]}. 4 Ants: '

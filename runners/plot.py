@@ -17,7 +17,7 @@ interpolated linearly at the union of the runs' logged steps).
 import csv
 import dataclasses
 import os
-from typing import Annotated, Sequence, Union
+from typing import Annotated, Mapping, Sequence, Union
 
 import matplotlib
 import numpy as np
@@ -91,10 +91,9 @@ def mean_and_band(curves):
   return grid, values.mean(0), error
 
 
-def plot(runs: Union[str, Sequence[str]], columns, out, title=None):
-  """Writes one panel per column of `columns` against env steps to `out`,
-  for one run directory or several (mean and band, see the module doc)."""
-  runs = [runs] if isinstance(runs, str) else list(runs)
+def _read_runs(runs, columns):
+  """Every run's rows; raises ValueError for a run without rows or one of
+  `columns`."""
   all_rows = []
   for run in runs:
     rows = read_metrics(run)
@@ -105,10 +104,34 @@ def plot(runs: Union[str, Sequence[str]], columns, out, title=None):
       raise ValueError(f"Columns {missing} are not in {run}/metrics.csv; "
                        f"available: {sorted(rows[-1])}.")
     all_rows.append(rows)
+  return all_rows
+
+
+def _panels(columns):
   fig, axes = plt.subplots(1, len(columns), figsize=(4.2 * len(columns), 3.2),
                            squeeze=False)
-  names = [os.path.basename(os.path.normpath(run)) for run in runs]
   for ax, column in zip(axes[0], columns):
+    ax.set_xlabel("environment steps (millions)")
+    ax.set_title(column)
+    ax.grid(alpha=0.3)
+  return fig, axes[0]
+
+
+def _save(fig, out):
+  fig.tight_layout()
+  os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
+  fig.savefig(out, dpi=100)
+  plt.close(fig)
+
+
+def plot(runs: Union[str, Sequence[str]], columns, out, title=None):
+  """Writes one panel per column of `columns` against env steps to `out`,
+  for one run directory or several (mean and band, see the module doc)."""
+  runs = [runs] if isinstance(runs, str) else list(runs)
+  all_rows = _read_runs(runs, columns)
+  fig, axes = _panels(columns)
+  names = [os.path.basename(os.path.normpath(run)) for run in runs]
+  for ax, column in zip(axes, columns):
     curves = [_curve(rows, column) for rows in all_rows]
     if len(curves) == 1:
       ax.plot(curves[0][0] / 1e6, curves[0][1], lw=1.2)
@@ -119,20 +142,33 @@ def plot(runs: Union[str, Sequence[str]], columns, out, title=None):
       ax.plot(steps / 1e6, mean, lw=1.8, color="black", label="mean")
       ax.fill_between(steps / 1e6, mean - error, mean + error, color="black",
                       alpha=0.15, lw=0, label="+- s.e.")
-    ax.set_xlabel("environment steps (millions)")
-    ax.set_title(column)
-    ax.grid(alpha=0.3)
   if len(runs) > 1:
-    axes[0][0].legend(fontsize=7)
+    axes[0].legend(fontsize=7)
   wall = np.mean([rows[-1].get("wall_time", 0.0) for rows in all_rows]) / 60
   fig.suptitle(title or (
       f"{names[0]} ({wall:.0f} min wall time)" if len(runs) == 1 else
       f"mean +- s.e. of {len(runs)} runs (legend; {wall:.0f} min wall "
       "time per run on average)"))
-  fig.tight_layout()
-  os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
-  fig.savefig(out, dpi=100)
-  plt.close(fig)
+  _save(fig, out)
+
+
+def plot_groups(groups: Mapping[str, Sequence[str]], columns, out, title):
+  """Writes one panel per column to `out` with, for every group (label ->
+  run directories, e.g. a variant's seeds), the mean of its runs in a band
+  of +- one standard error (`mean_and_band`; one run: its curve)."""
+  fig, axes = _panels(columns)
+  for label, runs in groups.items():
+    all_rows = _read_runs(runs, columns)
+    for ax, column in zip(axes, columns):
+      steps, mean, error = mean_and_band(
+          [_curve(rows, column) for rows in all_rows])
+      line, = ax.plot(steps / 1e6, mean, lw=1.5,
+                      label=f"{label} ({len(runs)})")
+      ax.fill_between(steps / 1e6, mean - error, mean + error,
+                      color=line.get_color(), alpha=0.2, lw=0)
+  axes[0].legend(fontsize=7, title="runs per line", title_fontsize=7)
+  fig.suptitle(title)
+  _save(fig, out)
 
 
 def main(argv=None):

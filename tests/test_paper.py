@@ -5,6 +5,7 @@ import json
 import os
 import shutil
 
+import imageio
 import pytest
 
 from runners import actor_pool
@@ -77,7 +78,8 @@ def _commit(cell, args, evaluations):
   folder = paper.results_directory(cell, args)
   os.makedirs(folder, exist_ok=True)
   with open(os.path.join(folder, 'metrics.csv'), 'w') as f:
-    f.write('update,env_steps,return\n1,16,42.0\n')
+    f.write('update,env_steps,return,success\n1,16,42.0,0.0\n'
+            f'2,32,50.0,{cell.seed / 10}\n')
   for n, successes in evaluations.items():
     evaluate.write_json(os.path.join(folder, paper.EVAL_FILE.format(n)),
                         _evaluation(cell, n, successes))
@@ -225,13 +227,21 @@ def test_report_rebuilds_the_tables_from_committed_results(tmp_path, capsys):
   # Into a marked block of a markdown file, again and again.
   docs = tmp_path / 'results.md'
   docs.write_text('# Results\n\nBefore.\n')
+  images = tmp_path / 'images'
   for _ in range(2):
     paper.main(cli.command_line(args, 'coop-paper').split()[1:] + [
-        '--report', '--docs', str(docs), '--json', str(tmp_path / 'all.json')])
+        '--report', '--docs', str(docs), '--json', str(tmp_path / 'all.json'),
+        '--figures', str(images)])
     written = docs.read_text()
     assert written.startswith('# Results\n\nBefore.\n')
     assert written.count(paper_report.BEGIN) == 1
-    assert text.strip() in written
+    assert text.strip().split('### Commands')[0].strip() in written
+  # The learning curves of what is committed, linked from the page: Table
+  # 1's transport (HRL's two models) and Fig. 4a (4 Ants); nothing else.
+  assert sorted(os.listdir(images)) == ['fig4a_transport_populations.png',
+                                        'table1_transport.png']
+  assert '](images/table1_transport.png)' in written
+  assert imageio.v2.imread(images / 'table1_transport.png').ndim == 3
   data = json.loads((tmp_path / 'all.json').read_text())
   marl_eval.check(data)
   assert sorted(data['coop_suite']) == [f'transport_n{n}' for n in (2, 3, 4, 5)]
