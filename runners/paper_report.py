@@ -167,7 +167,40 @@ def figures(args: paper.PaperArgs, plan, directory: str
       path = os.path.join(directory, name)
       plot.plot_groups(groups, FIGURE_COLUMNS, path, caption)
       drawn.append((caption, path))
+  starts = _starts(plan, args)
+  if starts:
+    caption = ('Fig. 5, transport with 4 Ants: success by start position '
+               '(evaluation episodes of the final checkpoints)')
+    path = os.path.join(directory, 'fig5_transport_starts.png')
+    plot.success_by_start(starts, "the Ants' mean start distance from the "
+                          'cylinder (m)', 'target distance from the '
+                          'cylinder (m)', path, caption)
+    drawn.append((caption, path))
   return drawn
+
+
+def _starts(plan, args) -> dict[str, tuple[list, list, list]]:
+  """{variant: (Ants' mean start distance, target distance, success)} over
+  the evaluation episodes of Table 1's transport models that record their
+  start (`start_agent_cylinder`, `start_cylinder_target`)."""
+  out = {}
+  for agent in ('hrl', 'no_memory', 'flat'):
+    x, y, success = [], [], []
+    for cell in _models(plan, 'table1', 'transport', agent, 4):
+      evaluation = read_evaluation(cell, 4, args)
+      if evaluation is None:
+        continue
+      try:
+        starts = [_episodes(evaluation, 'start_agent_cylinder'),
+                  _episodes(evaluation, 'start_cylinder_target')]
+      except KeyError:  # Evaluated before the start was recorded.
+        continue
+      x += starts[0]
+      y += starts[1]
+      success += _episodes(evaluation, 'success')
+    if x:
+      out[paper_plan.VARIANT_NAMES[agent]] = (x, y, success)
+  return out
 
 
 def report(args: paper.PaperArgs, plan=None) -> str:

@@ -152,6 +152,29 @@ def plot(runs: Union[str, Sequence[str]], columns, out, title=None):
   _save(fig, out)
 
 
+def success_by_start(panels: Mapping[str, tuple], xlabel, ylabel, out,
+                     title):
+  """Writes one scatter panel per label of `panels` (label -> (x, y,
+  success) arrays over episodes) to `out`: successes filled, failures
+  hollow, the panel's success rate in its title."""
+  fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.8),
+                           squeeze=False, sharex=True, sharey=True)
+  for ax, (label, (x, y, success)) in zip(axes[0], panels.items()):
+    x, y, success = (np.asarray(v, np.float64) for v in (x, y, success))
+    won = success > 0.5
+    ax.scatter(x[won], y[won], s=14, color="tab:green", label="success")
+    ax.scatter(x[~won], y[~won], s=14, facecolors="none",
+               edgecolors="tab:red", label="failure")
+    ax.set_title(f"{label}: {100 * won.mean():.0f}% of {len(won)}",
+                 fontsize=9)
+    ax.set_xlabel(xlabel)
+    ax.grid(alpha=0.3)
+  axes[0][0].set_ylabel(ylabel)
+  axes[0][0].legend(fontsize=7)
+  fig.suptitle(title)
+  _save(fig, out)
+
+
 def plot_groups(groups: Mapping[str, Sequence[str]], columns, out, title):
   """Writes one panel per column to `out` with, for every group (label ->
   run directories, e.g. a variant's seeds), the mean of its runs in a band

@@ -93,6 +93,25 @@ def test_transport_cylinder_sliding_through_the_zone_is_no_success():
   assert metrics["cylinder_target_distance"] > task.config.target_radius
 
 
+def test_transport_reports_where_the_episode_started():
+  env = coop_suite.load("transport", 3, seed=4)
+  for _ in range(2):  # Each episode its own start.
+    env.reset()
+    task, physics = env.task, env.physics
+    torsos = np.array([w.torso_position(physics)[:2] for w in task.walkers])
+    cylinder = task.cylinder.position(physics)[:2]
+    target = task.arena.target_position
+    env.step(_zeros(env))  # The figures stay those of the start.
+    metrics = env.episode_metrics()
+    np.testing.assert_allclose(
+        metrics["start_agent_cylinder"],
+        np.mean(np.linalg.norm(torsos - cylinder, axis=1)), atol=1e-6)
+    np.testing.assert_allclose(metrics["start_cylinder_target"],
+                               np.linalg.norm(target - cylinder), atol=1e-6)
+    lo, hi = task.config.start_distance
+    assert lo <= metrics["start_agent_cylinder"] <= hi * 1.5
+
+
 def test_transport_leaving_the_zone_restarts_the_hold():
   env = coop_suite.load("transport", 2, seed=1)
   env.reset()

@@ -4,7 +4,10 @@ The cylinder starts at the origin, agents start at random places and headings
 over a wide annulus around it, the target is drawn at random each episode.
 Success ("accurately and stably") when the cylinder's centre has stayed at
 rest inside the target zone for `hold_time` seconds; `reached` reports
-whether it ever entered the zone. The physics is calibrated so that the task
+whether it ever entered the zone, and `start_agent_cylinder` /
+`start_cylinder_target` where the episode started (the Ants' mean distance
+from the cylinder and the target's distance from it, m: the paper's
+success-by-start-position figure, appendix A.2). The physics is calibrated so that the task
 is cooperative (docs/tasks.md, docs/baselines.md).
 """
 
@@ -70,6 +73,7 @@ class Transport(base.CoopTask):
     arena.add_free_entity(self.cylinder)
     super().__init__(arena, ["ant"] * n_agents, config)
     self._held, self._reached = 0.0, False  # See `_update_status`.
+    self._start = (0.0, 0.0)  # See `_progress`.
     self._scales = (float(config.cylinder_target_scale),
                     float(config.agent_cylinder_scale),
                     float(config.agent_target_scale))
@@ -90,6 +94,9 @@ class Transport(base.CoopTask):
     self._reached = False
     starts = layouts.annulus(self.n_agents, [0.0, 0.0], cfg.start_distance,
                              random_state)
+    # The cylinder starts at the origin.
+    self._start = (float(np.mean(np.linalg.norm(starts, axis=1))),
+                   float(distance))
     yaws = random_state.uniform(-np.pi, np.pi, self.n_agents)
     for walker, xy, yaw in zip(self._walkers, starts, yaws):
       layouts.place(walker, physics, xy, yaw, random_state)
@@ -128,7 +135,9 @@ class Transport(base.CoopTask):
   def _progress(self, physics):
     return {"cylinder_target_distance": float(
                 self._measure(physics).cylinder_target),
-            "reached": bool(self._reached)}
+            "reached": bool(self._reached),
+            "start_agent_cylinder": self._start[0],
+            "start_cylinder_target": self._start[1]}
 
   def _task_state(self, physics):
     return np.concatenate([self.cylinder.position(physics)[:2],
