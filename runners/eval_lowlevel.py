@@ -23,8 +23,9 @@ from runners import cli
 
 
 @dataclasses.dataclass(frozen=True)
-class EvalArgs:
-  """What to evaluate."""
+class LowLevelEvalArgs:
+  """What to evaluate: a lower-layer controller (coop-eval's `EvalArgs` are
+  for a trained run's checkpoint)."""
 
   paradigm: str = fields.field('position', fields.one_of(*PARADIGMS))
   """'position' or 'velocity'."""
@@ -54,7 +55,8 @@ def _mean_and_error(rows):
   return out
 
 
-def stand_still(controller, args: EvalArgs, seconds: float = 5.0) -> dict:
+def stand_still(controller, args: LowLevelEvalArgs,
+                seconds: float = 5.0) -> dict:
   """Zero command from the first step: the ant's mean planar speed over the
   last half of the episode and how far its torso drifted (m)."""
   import coop_suite  # pylint: disable=g-import-not-at-top
@@ -78,7 +80,7 @@ def stand_still(controller, args: EvalArgs, seconds: float = 5.0) -> dict:
   return _mean_and_error(rows)
 
 
-def evaluate(args: EvalArgs) -> dict:
+def evaluate(args: LowLevelEvalArgs) -> dict:
   """Returns {metric: (mean, standard error)} over `args.episodes`."""
   import coop_suite  # pylint: disable=g-import-not-at-top
   from agents import lowlevel  # pylint: disable=g-import-not-at-top
@@ -117,7 +119,8 @@ def evaluate(args: EvalArgs) -> dict:
 
 
 def main(argv=None):
-  args = cli.parse(EvalArgs, argv, description=__doc__.splitlines()[0])
+  args = cli.parse(LowLevelEvalArgs, argv,
+                   description=__doc__.splitlines()[0])
   try:
     results = evaluate(args)
   except cli.user_errors() as e:

@@ -30,7 +30,7 @@ _OLD_RUN = os.path.join(_ROOT, 'tests', 'data', 'flat_config_run')
 _OLD_STATE = os.path.join(_OLD_RUN, 'checkpoints', 'ckpt_00000659',
                           'state.json')
 _CLIS = (config_lib.TrainArgs, evaluate.EvalArgs, video.VideoArgs,
-         pretrain_lowlevel.Args, eval_lowlevel.EvalArgs,
+         pretrain_lowlevel.Args, eval_lowlevel.LowLevelEvalArgs,
          baselines.BaselineArgs, paper.PaperArgs)
 
 

@@ -412,7 +412,7 @@ def test_cli_documents_every_flag_from_field_docstrings(capsys):
 
 def test_eval_lowlevel_reports_means_and_errors(tiny_run):
   from runners import eval_lowlevel  # pylint: disable=g-import-not-at-top
-  results = eval_lowlevel.evaluate(eval_lowlevel.EvalArgs(
+  results = eval_lowlevel.evaluate(eval_lowlevel.LowLevelEvalArgs(
       controller=os.path.join(tiny_run[0], 'controller'), episodes=2,
       time_limit=0.5))
   assert set(results) >= {'success', 'final_distance', 'fall', 'return'}
@@ -422,14 +422,14 @@ def test_eval_lowlevel_reports_means_and_errors(tiny_run):
 
 def test_shipped_position_controller_walks_to_targets():
   from runners import eval_lowlevel  # pylint: disable=g-import-not-at-top
-  results = eval_lowlevel.evaluate(eval_lowlevel.EvalArgs(episodes=5))
+  results = eval_lowlevel.evaluate(eval_lowlevel.LowLevelEvalArgs(episodes=5))
   assert results['fall'][0] == 0.0
   assert results['success'][0] >= 0.8, results
 
 
 def test_shipped_velocity_controller_tracks_commands():
   from runners import eval_lowlevel  # pylint: disable=g-import-not-at-top
-  results = eval_lowlevel.evaluate(eval_lowlevel.EvalArgs(
+  results = eval_lowlevel.evaluate(eval_lowlevel.LowLevelEvalArgs(
       paradigm='velocity', episodes=3, time_limit=10.0))
   assert results['fall'][0] == 0.0
   assert results['velocity_cosine'][0] >= 0.85, results
