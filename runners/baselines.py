@@ -549,14 +549,13 @@ def report(folder: str) -> str:
 
 
 def main(argv=None):
-  args = cli.parse(BaselineArgs, argv, description=__doc__.splitlines()[0])
-  try:
-    if args.report:
-      print(report(args.report))
-      return
-    out = play(args)
-  except cli.user_errors() as e:
-    cli.fail('python -m runners.baselines', e)
+  args, out = cli.run(BaselineArgs,
+                      lambda a: report(a.report) if a.report else play(a),
+                      argv, 'python -m runners.baselines',
+                      __doc__.splitlines()[0])
+  if args.report:
+    print(out)
+    return
   line = (f'{args.policy} on {args.task} with {args.n_agents} agents, seeds '
           f'{out["seeds"][0]}-{out["seeds"][1]}: success '
           f'{100 * out["success"]:.1f}% +- {100 * out["success_se"]:.1f}%')

@@ -42,6 +42,18 @@ def parse(cls, argv=None, description=None, prog=None):
     fail(prog, e)
 
 
+def run(cls, work, argv=None, prog=None, description=None):
+  """The body of every CLI's `main`: parses `argv` into the dataclass `cls`
+  and returns `(args, work(args))`; a user's error (`user_errors`) in either
+  is one line naming `prog` (default: the command's own name), exit 2."""
+  prog = prog or os.path.basename(sys.argv[0])
+  args = parse(cls, argv, description=description, prog=prog)
+  try:
+    return args, work(args)
+  except user_errors() as e:
+    fail(prog, e)
+
+
 def _flags(instance, skip):
   for field in dataclasses.fields(instance):
     value = getattr(instance, field.name)

@@ -119,12 +119,9 @@ def evaluate(args: LowLevelEvalArgs) -> dict:
 
 
 def main(argv=None):
-  args = cli.parse(LowLevelEvalArgs, argv,
-                   description=__doc__.splitlines()[0])
-  try:
-    results = evaluate(args)
-  except cli.user_errors() as e:
-    cli.fail('python -m runners.eval_lowlevel', e)
+  _, results = cli.run(LowLevelEvalArgs, evaluate, argv,
+                       'python -m runners.eval_lowlevel',
+                       __doc__.splitlines()[0])
   for name, (mean, se) in results.items():
     print(f'{name:>18}: {mean:8.3f} +- {se:.3f}')
   print(json.dumps({k: v[0] for k, v in results.items()}))

@@ -294,12 +294,9 @@ def evaluate(args: EvalArgs, log=None) -> dict:
 
 
 def main(argv=None):
-  args = cli.parse(EvalArgs, argv, description=__doc__.splitlines()[0])
-  try:
-    out = evaluate(args, log=lambda line: print(line, file=sys.stderr,
-                                                 flush=True))
-  except cli.user_errors() as e:
-    cli.fail('coop-eval', e)
+  log = lambda line: print(line, file=sys.stderr, flush=True)
+  args, out = cli.run(EvalArgs, lambda args: evaluate(args, log=log), argv,
+                      'coop-eval', __doc__.splitlines()[0])
   print(f'{out["description"]}: {len(args.checkpoint)} model(s) x '
         f'{len(args.seeds)} seed(s) x {args.episodes} episodes')
   for model in out['models']:

@@ -380,33 +380,37 @@ def run_plan(args: PaperArgs, plan=None,
       ray.shutdown()
 
 
+def _command(args: PaperArgs) -> Optional[str]:
+  """What `coop-paper` does with `args`; the signal that stopped training
+  early, if any."""
+  if args.report:
+    from runners import paper_report  # pylint: disable=g-import-not-at-top
+    text = paper_report.report(args)
+    if args.json:
+      from runners import evaluate  # pylint: disable=g-import-not-at-top
+      evaluate.write_json(args.json, paper_report.marl_eval_data(args))
+    if args.docs:
+      paper_report.write_block(args.docs, text)
+      print(f'Wrote the tables into {args.docs}.')
+    else:
+      print(text)
+  elif args.dry_run:
+    print(dry_run(args))
+  elif args.stash:
+    folders = [f for f in (stash(c, args) for c in selected(args)) if f]
+    print('\n'.join(['Stashed (commit these; the next coop-paper resumes '
+                     'from them):', *folders]) if folders
+          else 'No unfinished run to stash.')
+  else:
+    return run_plan(args, log=lambda line: print(line, flush=True))
+  return None
+
+
 def main(argv=None):
-  args = cli.parse(PaperArgs, argv, description=__doc__.splitlines()[0])
-  try:
-    if args.report:
-      from runners import paper_report  # pylint: disable=g-import-not-at-top
-      text = paper_report.report(args)
-      if args.json:
-        from runners import evaluate  # pylint: disable=g-import-not-at-top
-        evaluate.write_json(args.json, paper_report.marl_eval_data(args))
-      if args.docs:
-        paper_report.write_block(args.docs, text)
-        print(f'Wrote the tables into {args.docs}.')
-      else:
-        print(text)
-      return
-    if args.dry_run:
-      print(dry_run(args))
-      return
-    if args.stash:
-      folders = [f for f in (stash(c, args) for c in selected(args)) if f]
-      print('\n'.join(['Stashed (commit these; the next coop-paper resumes '
-                       'from them):', *folders]) if folders
-            else 'No unfinished run to stash.')
-      return
-    stopped = run_plan(args, log=lambda line: print(line, flush=True))
-  except cli.user_errors() as e:
-    cli.fail('coop-paper', e)
+  args, stopped = cli.run(PaperArgs, _command, argv, 'coop-paper',
+                          __doc__.splitlines()[0])
+  if args.report or args.dry_run or args.stash:
+    return
   if stopped:
     print(f'Stopped by {stopped}; run the same coop-paper command again to '
           'continue.', flush=True)

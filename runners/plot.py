@@ -195,12 +195,9 @@ def plot_groups(groups: Mapping[str, Sequence[str]], columns, out, title):
 
 
 def main(argv=None):
-  args = cli.parse(PlotArgs, argv, description=__doc__.splitlines()[0],
-                   prog="python -m runners.plot")
-  try:
-    plot(args.runs, args.columns, args.out, args.title or None)
-  except cli.user_errors() as e:
-    cli.fail("python -m runners.plot", e)
+  args, _ = cli.run(
+      PlotArgs, lambda a: plot(a.runs, a.columns, a.out, a.title or None),
+      argv, "python -m runners.plot", __doc__.splitlines()[0])
   print(f"wrote {args.out}")
 
 

@@ -228,11 +228,8 @@ def train(args: Args) -> dict[str, Any]:
 
 
 def main(argv=None):
-  args = cli.parse(Args, argv, description=__doc__.splitlines()[0])
-  try:
-    exported = train(args)
-  except cli.user_errors() as e:
-    cli.fail('coop-pretrain-lowlevel', e)
+  args, exported = cli.run(Args, train, argv, 'coop-pretrain-lowlevel',
+                           __doc__.splitlines()[0])
   training = exported['training']
   print(json.dumps({'update': training['update'],
                     'env_steps': training['env_steps'],

@@ -26,13 +26,11 @@ def main(argv=None):
   """Exit status 0 when the run finished, 128 + the signal's number when
   SIGINT / SIGTERM stopped it early (with a checkpoint), 2 for a user
   error (one line)."""
-  args = cli.parse(config_lib.TrainArgs, argv,
-                   description=__doc__.splitlines()[0])
-  from runners import learner_loop  # pylint: disable=g-import-not-at-top
-  try:
-    summary = learner_loop.train(args)
-  except cli.user_errors() as e:
-    cli.fail('coop-train', e)
+  def work(args):
+    from runners import learner_loop  # pylint: disable=g-import-not-at-top
+    return learner_loop.train(args)
+  args, summary = cli.run(config_lib.TrainArgs, work, argv, 'coop-train',
+                          __doc__.splitlines()[0])
   keys = ('update', 'env_steps', 'return', 'success', 'wall_time')
   print(json.dumps({k: summary.get(k) for k in keys}))
   print(f'checkpoint: {summary["checkpoint"]}')

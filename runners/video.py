@@ -129,11 +129,8 @@ def population(species):
 
 
 def main(argv=None):
-  args = cli.parse(VideoArgs, argv, description=__doc__.splitlines()[0])
-  try:
-    frames = record(args)
-  except cli.user_errors() as e:
-    cli.fail("coop-video", e)
+  args, frames = cli.run(VideoArgs, record, argv, "coop-video",
+                         __doc__.splitlines()[0])
   for path in (args.out, args.png):
     if path:
       print(f"wrote {path} ({os.path.getsize(path) / 1e3:.0f} kB)")
