@@ -169,8 +169,8 @@ def figures(args: paper.PaperArgs, plan, directory: str
       drawn.append((caption, path))
   starts = _starts(plan, args)
   if starts:
-    caption = ('Fig. 5, transport with 4 Ants: success by start position '
-               '(evaluation episodes of the final checkpoints)')
+    caption = ('Fig. 5, transport with 4 Ants: success by start position, '
+               'final checkpoints')
     path = os.path.join(directory, 'fig5_transport_starts.png')
     plot.success_by_start(starts, "the Ants' mean start distance from the "
                           'cylinder (m)', 'target distance from the '
@@ -255,7 +255,9 @@ def report(args: paper.PaperArgs, plan=None) -> str:
               'Training success and return (windows of 100 episodes in each '
               "model's metrics.csv) against environment steps: the mean of "
               "a configuration's models in a band of +- one standard error; "
-              'the legend gives how many models.', '']
+              'the legend gives how many models. Fig. 5: every evaluation '
+              'episode of the final checkpoints at its start layout, filled '
+              'for a success.', '']
     for caption, path in drawn:
       lines += [f'![{caption}]({os.path.relpath(path, base)})', '']
   lines += ['### Commands', '',

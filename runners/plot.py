@@ -157,7 +157,8 @@ def success_by_start(panels: Mapping[str, tuple], xlabel, ylabel, out,
   """Writes one scatter panel per label of `panels` (label -> (x, y,
   success) arrays over episodes) to `out`: successes filled, failures
   hollow, the panel's success rate in its title."""
-  fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.8),
+  fig, axes = plt.subplots(1, len(panels),
+                           figsize=(max(6.5, 4.2 * len(panels)), 3.8),
                            squeeze=False, sharex=True, sharey=True)
   for ax, (label, (x, y, success)) in zip(axes[0], panels.items()):
     x, y, success = (np.asarray(v, np.float64) for v in (x, y, success))
@@ -171,7 +172,7 @@ def success_by_start(panels: Mapping[str, tuple], xlabel, ylabel, out,
     ax.grid(alpha=0.3)
   axes[0][0].set_ylabel(ylabel)
   axes[0][0].legend(fontsize=7)
-  fig.suptitle(title)
+  fig.suptitle(title, fontsize=10)
   _save(fig, out)
 
 
