@@ -98,7 +98,8 @@ def test_dry_run_prints_every_cell_with_its_status(tmp_path, capsys):
                          'state.json'), 'w') as f:
     json.dump({'format': 1, 'iteration': 3,  # A run from before orbax.
                'env_steps': 1_500_000, 'species': []}, f)
-  paper.main(['--dry-run', '--results', args.results, '--runs', args.runs])
+  paper.main(['--dry-run', '--results', args.results, '--runs', args.runs,
+              '--partial', args.partial])  # Not the repository's stashes.
   lines = capsys.readouterr().out.splitlines()
   assert len(lines) == len(paper_plan.PLAN) + 2  # Header and total.
   for cell, line in zip(paper_plan.PLAN, lines[1:]):
