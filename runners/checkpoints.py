@@ -129,26 +129,28 @@ def write_policy(checkpoint: str, logdir: str) -> str:
     ValueError: `checkpoint` is not `policy_writable` (copy it whole).
   """
   from agents.ppo import learning  # pylint: disable=g-import-not-at-top
-  if not policy_writable(checkpoint):
+  read = _read(checkpoint) if _is_step(checkpoint) else None  # Read once.
+  if read is None or not _in_todays_format(read['state']):
     raise ValueError(f'{checkpoint} is from before orbax or holds learner '
                      'states of an older format: copy it whole.')
-  state = read_state(checkpoint)
-  saved = {s['name']: learning.handed_on(saved_learner(checkpoint, s['name']))
-           for s in state['species']}
-  return _write(_directory(logdir), saved, {**state, 'policy_only': True},
-                keep=1)
+  saved = {name: learning.handed_on(_saved_learner(read, name))
+           for name in read['state']['learners']}
+  return _write(_directory(logdir), saved,
+                {**read['state'], 'policy_only': True}, keep=1)
 
 
 def policy_writable(checkpoint: str) -> bool:
   """Whether `write_policy` can write `checkpoint`'s policy: an orbax step
   whose learners are all in today's format (older ones are read through
   their learner's upgrade, which only a built learner can do)."""
+  return _is_step(checkpoint) and _in_todays_format(read_state(checkpoint))
+
+
+def _in_todays_format(state: dict[str, Any]) -> bool:
   from agents.ppo import learning  # pylint: disable=g-import-not-at-top
-  if not _is_step(checkpoint):
-    return False
-  learners = read_state(checkpoint).get('learners', {})
   return all(entry.get('format') == learning.CHECKPOINT_FORMAT
-             and entry.get('kind') for entry in learners.values())
+             and entry.get('kind')
+             for entry in state.get('learners', {}).values())
 
 
 def _write(directory: str, saved: Mapping[str, dict[str, Any]],
@@ -333,6 +335,11 @@ def saved_learner(checkpoint: str, species: str) -> dict[str, Any]:
   if species not in read['learners']:
     raise ValueError(f'{checkpoint} holds no learner for species '
                      f'{species!r}.')
+  return _saved_learner(read, species)
+
+
+def _saved_learner(read: dict[str, Any], species: str) -> dict[str, Any]:
+  """One species' saved learner state from a `_read` orbax step."""
   return {**read['state']['learners'][species],
           'state': read['learners'][species]}
 

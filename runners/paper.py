@@ -8,8 +8,9 @@
 The plan (`runners.paper_plan.PLAN`) is data: task x variant x population x
 seed, with budgets and flags. A cell is done when `--results`/<cell>/ holds
 its metrics.csv, its final checkpoint's policy (with the lower layer it was
-trained with) and one `eval_n<N>.json` per evaluated population; done cells are
-skipped, so the committed results are the plan's memory across sessions. A
+trained with) and one `eval_n<N>.json` per evaluated population; done cells
+are skipped, so the committed results are the plan's memory across
+sessions. A
 cell whose run directory (`--runs`/<cell>/) has a checkpoint continues from
 it (`coop-train --resume`), one whose training has finished is only
 evaluated. Evaluation is the paper's protocol: the final checkpoint, `--episodes`
@@ -265,8 +266,8 @@ def _copy_run(logdir: str, checkpoint: str, final: str,
   """Writes `final` whole or not at all: `logdir`'s metrics.csv and lower
   layer and the one `checkpoint` (a run directory that coop-train can
   resume; with `policy_only`, its policy, `checkpoints.write_policy`, if
-  its layout allows, else whole), plus
-  {file name: writer(path)} of `extra`."""
+  its layout allows, else whole), plus {file name: writer(path)} of
+  `extra`."""
   from runners import checkpoints  # pylint: disable=g-import-not-at-top
   from runners import run_dir  # pylint: disable=g-import-not-at-top
   parent = os.path.dirname(final)

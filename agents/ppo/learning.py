@@ -362,8 +362,6 @@ class PPOLearner(core.Learner):
     self._state = checkpointing.from_state_dict(
         source, self._state, self._state_dict(saved, source))
 
-  HANDED_ON = HANDED_ON
-
   def initialize_from(self, saved: dict[str, Any],
                       source: str = 'checkpoint') -> None:
     """Starts from another run's saved state (e.g. a curriculum stage): its

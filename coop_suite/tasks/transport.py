@@ -7,8 +7,8 @@ rest inside the target zone for `hold_time` seconds; `reached` reports
 whether it ever entered the zone, and `start_agent_cylinder` /
 `start_cylinder_target` where the episode started (the Ants' mean distance
 from the cylinder and the target's distance from it, m: the paper's
-success-by-start-position figure, appendix A.2). The physics is calibrated so that the task
-is cooperative (docs/tasks.md, docs/baselines.md).
+success-by-start-position figure, appendix A.2). The physics is calibrated
+so that the task is cooperative (docs/tasks.md, docs/baselines.md).
 """
 
 import dataclasses
