@@ -73,7 +73,9 @@ class TrainArgs:
   command_period: float = fields.field(0.5, fields.POSITIVE)
   """Seconds between two commands of the middle layer."""
   stage: str = 'joint'
-  """Ravine only: curriculum stage joint, pushers or crossers."""
+  """Curriculum stage: ravine joint, pushers or crossers; transport joint
+  or push (the paper's reward without its agent-target term); other tasks
+  have only joint."""
   init_from: tuple[str, ...] = _resumable(())
   """Start species from other runs, as SPECIES=PATH pairs (the ravine's
   curriculum: pusher=RUN_A crosser=RUN_B); PATH is a run directory (its
@@ -150,7 +152,9 @@ class TrainArgs:
     if self.time_limit > 0:
       options['time_limit'] = float(self.time_limit)
     if self.task == 'ravine':
-      options.update(stage=self.stage, n_pushers=self.n_pushers)
+      options['n_pushers'] = self.n_pushers
+    if self.task == 'ravine' or self.stage != 'joint':
+      options['stage'] = self.stage  # A task without stages refuses it.
     if self.task == 'walk_to_target':
       options['resample_on_reach'] = self.resample_on_reach
     return options

@@ -177,9 +177,34 @@ def status(cell: paper_plan.Cell, args: PaperArgs) -> Status:
     logdir = partial_directory(cell, args)  # A stashed run, if any.
     if not checkpoints.list_checkpoints(logdir):
       return Status('todo')
-  steps = checkpoints.read_state(checkpoints.resolve(logdir))['env_steps']
+  saved = checkpoints.read_state(checkpoints.resolve(logdir))
+  if 'args' in saved:
+    check_run(cell, args, saved['args'], logdir)
+  steps = saved['env_steps']
   return Status('trained' if steps >= budget(cell, args) else 'partial',
                 steps)
+
+
+def check_run(cell: paper_plan.Cell, args: PaperArgs, saved: dict,
+              logdir: str) -> None:
+  """ValueError unless the run in `logdir` (its saved `TrainArgs` dict) is
+  the cell's: the same settings as `coop-train --resume` requires, and
+  started from the same species' stages (a run trained before the plan
+  changed is not taken for a cell of the new plan)."""
+  from runners import config as config_lib  # pylint: disable=g-import-not-at-top
+  expected = train_args(cell, args)
+  started = {str(pair).partition('=')[0]
+             for pair in config_lib.flat_dict(saved).get('init_from', ())}
+  try:
+    config_lib.check_resumable(saved, expected)
+    if started != {species for species, _ in cell.init_from}:
+      raise ValueError(f'the run started from {sorted(started) or "scratch"}'
+                       f', the cell from the stages of '
+                       f'{[s for s, _ in cell.init_from] or "none"}.')
+  except ValueError as error:
+    raise ValueError(f'{logdir} is not a run of cell {cell.path}: {error} '
+                     'Move it away (or give coop-paper other --runs).'
+                     ) from None
 
 
 def selected(args: PaperArgs, plan=None) -> list[paper_plan.Cell]:

@@ -51,6 +51,7 @@ def _old_state():
     '--task transport --n-agents 4 --agent mappo --actors 2 '
     '--init-from pusher=PATH --stage joint',
     '--task ravine --stage joint --init-from pusher=RUN_A crosser=RUN_B',
+    '--task transport --stage push --seed 2 --total-steps 3000000',
     '--task corridor --agent no_memory --actors 8 --envs-per-actor 16',
     '--actors 0 --total-steps 307200 --critic stop_gradient --seed 3 '
     '--learning-rate 0.001 --upper-layer-sizes 16 16 --no-normalize-values '
@@ -62,6 +63,20 @@ def test_documented_flags_parse_and_print_back(argv):
   assert cli.parse(config_lib.TrainArgs, line.split()[1:]) == args
   flat = config_lib.flat_dict(args.to_dict())  # As JSON, lists.
   assert config_lib.train_args(**flat) == args
+
+
+def test_the_stage_reaches_the_task_that_has_it():
+  """The curriculum stage is a task option of transport and the ravine; a
+  task without stages refuses one rather than ignoring it."""
+  import coop_suite  # pylint: disable=g-import-not-at-top
+  def options(argv):
+    return cli.parse(config_lib.TrainArgs, argv.split()).env_options()
+  assert options('--task transport') == {}  # The joint stage: as ever.
+  assert options('--task transport --stage push') == {'stage': 'push'}
+  assert options('--task ravine --stage pushers') == {'stage': 'pushers',
+                                                      'n_pushers': 2}
+  with pytest.raises(ValueError, match='stage'):
+    coop_suite.load('corridor', 4, **options('--task corridor --stage push'))
 
 
 def test_the_agent_config_is_nested_not_copied():

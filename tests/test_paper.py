@@ -104,7 +104,7 @@ def test_dry_run_prints_every_cell_with_its_status(tmp_path, capsys):
   assert len(lines) == len(paper_plan.PLAN) + 2  # Header and total.
   for cell, line in zip(paper_plan.PLAN, lines[1:]):
     assert line.startswith(cell.path + ' ') and 'coop-train' in line
-  assert ' done ' in lines[1] and 'partial 1.50M/15M' in lines[2]
+  assert ' done ' in lines[1] and 'partial 1.50M/12M' in lines[2]
   assert all(' todo ' in line for line in lines[3:-1])
   assert lines[-1].startswith(f'{len(paper_plan.PLAN)} cells, ~')
   # Every command is the cell's own TrainArgs, through coop-train's parser.
@@ -113,6 +113,37 @@ def test_dry_run_prints_every_cell_with_its_status(tmp_path, capsys):
     assert words[0] == 'coop-train'
     assert cli.parse(config_lib.TrainArgs, words[1:]) == dataclasses.replace(
         paper.train_args(cell, args), progress=True)
+
+
+def _fake_run(logdir, train_args, env_steps):
+  """A run directory whose one checkpoint (format 1) saved `train_args`."""
+  os.makedirs(os.path.join(logdir, 'checkpoints', 'ckpt_00000003'))
+  with open(os.path.join(logdir, 'checkpoints', 'ckpt_00000003',
+                         'state.json'), 'w') as f:
+    json.dump({'format': 1, 'iteration': 3, 'env_steps': env_steps,
+               'species': [], 'args': train_args.to_dict()}, f)
+
+
+def test_a_run_of_other_settings_is_not_taken_for_the_cell(tmp_path):
+  """A run left from before the plan changed (here transport trained from
+  scratch, where the cell now starts from its push stage) is refused, not
+  evaluated as the cell."""
+  args = _args(tmp_path)
+  push, joint = paper_plan.PLAN[:2]
+  assert (push.stage, joint.init_from) == ('push', (('ant', push.name),))
+  own = paper.train_args(joint, args)
+  _fake_run(paper.run_directory(joint, args), own, joint.budget)
+  assert paper.status(joint, args).state == 'trained'
+  shutil.rmtree(paper.run_directory(joint, args))
+  _fake_run(paper.run_directory(joint, args),
+            dataclasses.replace(own, init_from=()), joint.budget)
+  with pytest.raises(ValueError, match='started from scratch'):
+    paper.status(joint, args)
+  _fake_run(paper.run_directory(push, args),
+            dataclasses.replace(paper.train_args(push, args), stage='joint'),
+            1000)
+  with pytest.raises(ValueError, match='--stage'):
+    paper.status(push, args)
 
 
 def test_the_plan_is_the_papers():
@@ -126,11 +157,18 @@ def test_the_plan_is_the_papers():
       ('corridor', 4), ('ravine', 2), ('transport', 4)]
   assert {c.seed for c in hrl} == set(range(5))
   assert all(sorted(c.populations) == [2, 3, 4, 5] for c in hrl)
-  ravine = [c for c in plan if c.task == 'ravine' and not c.stage]
-  for joint in ravine:  # Its stages come first and feed it.
-    names = [c.name for c in plan]
+  by_name = {c.name: c for c in plan}
+  names = [c.name for c in plan]
+  for joint in [c for c in plan if c.task in ('ravine', 'transport')
+                and not c.stage]:  # Its stages come first and feed it.
+    assert joint.init_from
     for _, stage in joint.init_from:
       assert names.index(stage) < names.index(joint.name)
+      assert by_name[stage].stage and not by_name[stage].zero_shot
+    if joint.task == 'transport':  # 15M steps a model, its stage included.
+      (species, push), = joint.init_from
+      assert species == 'ant' and by_name[push].stage == 'push'
+      assert joint.budget + by_name[push].budget == paper_plan.BUDGET
   ablations = [c for c in plan if c.agent in ('flat', 'no_memory')]
   assert {c.seed for c in ablations} == {0, 1, 2}
   assert [c.agent for c in plan[:len(hrl) + 10]].count('flat') == 0
@@ -210,7 +248,7 @@ def test_the_plan_skips_done_cells_and_resumes_a_partial_one(
 def test_report_rebuilds_the_tables_from_committed_results(tmp_path, capsys):
   args = _args(tmp_path, episodes=4)
   hrl = [c for c in paper_plan.PLAN if (c.experiment, c.task, c.agent) ==
-         ('table1', 'transport', 'hrl')]
+         ('table1', 'transport', 'hrl') and not c.stage]
   _commit(hrl[0], args, {4: [1, 1, 0, 0], 2: [0, 0, 0, 1], 3: [1] * 4,
                          5: [0] * 4})
   _commit(hrl[1], args, {4: [1, 0, 0, 0], 2: [0] * 4, 3: [1] * 4,
@@ -226,7 +264,8 @@ def test_report_rebuilds_the_tables_from_committed_results(tmp_path, capsys):
           '12.8% +- 5.6 | 12% +- 3 | 12% +- 3 |') in text
   assert '| corridor (4 Ants) | HRL | not run |  | 0/5 |' in text
   assert '| 4 | 37.5% +- 18.3 | +- 12.5 | 2/3 |' in text  # Fig. 4a.
-  assert 'coop-train --seed 1 --actors 0 --total-steps 15000000 --logdir' in text
+  assert 'coop-train --seed 1 --actors 0 --total-steps 12000000 --logdir' in text
+  assert 'coop-train --seed 1 --actors 0 --total-steps 3000000 --logdir' in text
   assert '# transport/hrl/n4/s1 (done)' in text
   # Into a marked block of a markdown file, again and again.
   docs = tmp_path / 'results.md'

@@ -112,6 +112,27 @@ def test_transport_reports_where_the_episode_started():
     assert lo <= metrics["start_agent_cylinder"] <= hi * 1.5
 
 
+def test_transport_push_stage_drops_only_the_agent_target_term():
+  """The push stage (the curriculum's first) is the same episode with the
+  agent-target term at 0; every other term and figure is unchanged."""
+  runs = {}
+  for stage in ("joint", "push"):
+    env = coop_suite.load("transport", 3, seed=2, stage=stage)
+    env.reset()
+    rewards_seen = [np.array(env.step(_zeros(env)).reward) for _ in range(5)]
+    runs[stage] = env.episode_metrics(), np.array(rewards_seen)
+  (joint, joint_rewards), (push, push_rewards) = runs["joint"], runs["push"]
+  assert joint["reward/agent_target"] > 0 and push["reward/agent_target"] == 0
+  for key in ("reward/cylinder_target", "reward/agent_cylinder",
+              "cylinder_target_distance", "start_agent_cylinder"):
+    assert push[key] == joint[key]
+  np.testing.assert_allclose(
+      push["return"], joint["return"] - joint["reward/agent_target"])
+  assert np.all(push_rewards < joint_rewards)
+  with pytest.raises(ValueError, match="push"):
+    coop_suite.load("transport", 3, stage="pushers")
+
+
 def test_transport_leaving_the_zone_restarts_the_hold():
   env = coop_suite.load("transport", 2, seed=1)
   env.reset()

@@ -267,7 +267,8 @@ def test_the_newest_and_the_best_are_kept(tmp_path):
 def test_a_format_2_checkpoint_reads_with_its_counter_named_update():
   """Orbax checkpoints written before the counter's rename (format 2, the
   published seed-0 cell) read, and resume, as `update`."""
-  published = os.path.join(REPO, 'results', 'paper', 'transport_hrl_n4_s0',
+  published = os.path.join(REPO, 'results', 'transport_no_curriculum',
+                           'transport_hrl_n4_s0',
                            'checkpoints', '1465')
   with open(os.path.join(published, 'state', 'metadata')) as f:
     on_disk = json.load(f)
