@@ -53,7 +53,8 @@ class TrainArgs:
   """Low-level environment steps to train for (0.05 s control steps of one
   environment copy), rounded up to whole updates."""
   logdir: str = _resumable('')
-  """Run directory; default runs/<task>_<agent>_n<n_agents>_s<seed>."""
+  """Run directory; default runs/<task>_<agent>[_<stage>]_n<n_agents>_s<seed>
+  (the stage unless joint)."""
   ray_address: str = _resumable('')
   """Join this Ray cluster: 'auto' or its head's HOST:6379, run on one of
   its nodes (docs/training.md, "Running on a Ray cluster"); empty joins
@@ -113,8 +114,9 @@ class TrainArgs:
       object.__setattr__(self, 'logdir', os.path.dirname(os.path.dirname(
           os.path.abspath(self.resume_from))))
     if not self.logdir:
+      stage = '' if self.stage == 'joint' else f'{self.stage}_'
       object.__setattr__(self, 'logdir', f'runs/{self.task}_{self.agent}_'
-                         f'n{self.n_agents}_s{self.seed}')
+                         f'{stage}n{self.n_agents}_s{self.seed}')
     object.__setattr__(self, 'init_from', tuple(self.init_from))
     self.init_sources()  # Checks the pairs.
 

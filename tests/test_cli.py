@@ -77,6 +77,11 @@ def test_the_stage_reaches_the_task_that_has_it():
                                                       'n_pushers': 2}
   with pytest.raises(ValueError, match='stage'):
     coop_suite.load('corridor', 4, **options('--task corridor --stage push'))
+  # Each stage its own default run directory, named as coop-paper's cells.
+  assert cli.parse(config_lib.TrainArgs, '--task transport --stage push'.split()
+                   ).logdir == 'runs/transport_hrl_push_n4_s0'
+  assert cli.parse(config_lib.TrainArgs, ['--task', 'transport']
+                   ).logdir == 'runs/transport_hrl_n4_s0'
 
 
 def test_the_agent_config_is_nested_not_copied():
