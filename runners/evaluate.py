@@ -56,7 +56,8 @@ class EvalArgs:
   stochastic: bool = False
   """Sample commands instead of taking the policy's mean."""
   stage: str = ''
-  """Ravine stage; empty for the training one."""
+  """Curriculum stage of the task (ravine: joint, pushers, crossers;
+  transport: joint, push); empty for the training one."""
   n_pushers: int = fields.field(0, _TRAINING | fields.COUNT)
   """Ravine pushers; 0 for the training count."""
   time_limit: float = fields.field(0.0, config_lib.TIME_LIMIT)
