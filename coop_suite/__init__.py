@@ -86,8 +86,8 @@ def load(task, n_agents=None, *, seed=None, time_limit=None, fast_path=True,
     fast_path: False steps through plain composer (`coop_suite.fast`): the
       same numbers, several times slower; for checking the fast path.
     **kwargs: task options: any field of the task's config dataclass (e.g.
-      `target_radius=1.5`), plus task arguments such as `stage` and
-      `n_pushers` for the ravine.
+      `target_radius=1.5`), plus task arguments: `stage` (transport's and
+      the ravine's training curricula) and the ravine's `n_pushers`.
 
   Returns:
     A `CoopEnvironment` (a `composer.Environment`). It pickles and copies

@@ -78,8 +78,8 @@ class TrainArgs:
   or push (the paper's reward without its agent-target term); other tasks
   have only joint."""
   init_from: tuple[str, ...] = _resumable(())
-  """Start species from other runs, as SPECIES=PATH pairs (the ravine's
-  curriculum: pusher=RUN_A crosser=RUN_B); PATH is a run directory (its
+  """Start species from other runs, as SPECIES=PATH pairs (the curricula:
+  transport ant=PUSH_RUN, the ravine pusher=RUN_A crosser=RUN_B); PATH is a run directory (its
   newest complete checkpoint) or a checkpoint directory. Each named species
   takes that run's parameters and normalisers with a fresh optimiser; a
   resumed run continues from its own checkpoint instead."""

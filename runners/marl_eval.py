@@ -9,8 +9,8 @@ data") aggregates raw results of this form:
         'absolute_metrics': {<metric>: [one value per episode]}}}}}}
 
 What we fill (`layout`): env_name `coop_suite`; task_name the evaluation
-task and population, `<task>_n<N>` (ravine: N crossers; a ravine stage
-other than joint adds it, `ravine_pushers_n2`); algorithm_name the variant
+task and population, `<task>_n<N>` (ravine: N crossers; a curriculum
+stage other than joint adds it, `ravine_pushers_n2`, `transport_push_n4`); algorithm_name the variant
 (`hrl`, `no_memory`, `flat`, `mappo`); run_name `seed_<training seed>` (as
 BenchMARL names runs); one logging step per model, `step_<update>` of
 the evaluated checkpoint, with `step_count` its environment steps (0.05 s
@@ -28,7 +28,7 @@ ABSOLUTE = 'absolute_metrics'
 
 
 def task_name(task: str, n_agents: int, stage: str = '') -> str:
-  """`<task>_n<N>`, with a ravine stage other than joint: `ravine_pushers_n2`."""
+  """`<task>_n<N>`, with a stage other than joint: `ravine_pushers_n2`."""
   stage = f'_{stage}' if stage and stage != 'joint' else ''
   return f'{task}{stage}_n{n_agents}'
 

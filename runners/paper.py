@@ -149,9 +149,11 @@ def eval_command(cell: paper_plan.Cell, n_agents: int,
 class Status:
   """Where a cell stands: 'done' (results committed), 'trained' (final
   checkpoint, not yet evaluated), 'partial' (a checkpoint short of the
-  budget) or 'todo'."""
+  budget), 'todo', or 'foreign' (its run directory or stash holds a run of
+  other settings, which `problem` names; nothing is run over it)."""
   state: str
   env_steps: int = 0
+  problem: str = ''
 
   def describe(self, total: int) -> str:
     if self.state == 'partial':
@@ -178,9 +180,12 @@ def status(cell: paper_plan.Cell, args: PaperArgs) -> Status:
     if not checkpoints.list_checkpoints(logdir):
       return Status('todo')
   saved = checkpoints.read_state(checkpoints.resolve(logdir))
-  if 'args' in saved:
-    check_run(cell, args, saved['args'], logdir)
   steps = saved['env_steps']
+  try:
+    if 'args' in saved:
+      check_run(cell, args, saved['args'], logdir)
+  except ValueError as error:
+    return Status('foreign', steps, str(error))
   return Status('trained' if steps >= budget(cell, args) else 'partial',
                 steps)
 
@@ -193,14 +198,15 @@ def check_run(cell: paper_plan.Cell, args: PaperArgs, saved: dict,
   changed is not taken for a cell of the new plan)."""
   from runners import config as config_lib  # pylint: disable=g-import-not-at-top
   expected = train_args(cell, args)
-  started = {str(pair).partition('=')[0]
-             for pair in config_lib.flat_dict(saved).get('init_from', ())}
   try:
     config_lib.check_resumable(saved, expected)
-    if started != {species for species, _ in cell.init_from}:
-      raise ValueError(f'the run started from {sorted(started) or "scratch"}'
-                       f', the cell from the stages of '
-                       f'{[s for s, _ in cell.init_from] or "none"}.')
+    started = config_lib.TrainArgs.from_dict(saved).init_sources()
+    stages = dict(cell.init_from)
+    if set(started) != set(stages) or any(  # Its stage cell's folder.
+        stages[s] not in os.path.normpath(path).split(os.sep)
+        for s, path in started.items()):
+      raise ValueError(f'the run started from {started or "scratch"}, the '
+                       f'cell from {stages or "scratch"}.')
   except ValueError as error:
     raise ValueError(f'{logdir} is not a run of cell {cell.path}: {error} '
                      'Move it away (or give coop-paper other --runs).'
@@ -221,18 +227,21 @@ def dry_run(args: PaperArgs, plan=None) -> str:
   wall time on this machine and command; then the total."""
   lines, total = [f'{"cell":32s} {"status":22s} {"budget":>7s}  '
                   f'{"to go":>9s}  command'], 0.0
-  for cell in selected(args, plan):
+  cells = selected(args, plan)
+  for cell in cells:
     state = status(cell, args)
     steps = budget(cell, args)
-    remaining = {'done': None, 'trained': 0}.get(state.state,
-                                                 steps - state.env_steps)
+    remaining = {'done': None, 'trained': 0, 'foreign': steps}.get(
+        state.state, steps - state.env_steps)
     seconds = 0.0 if remaining is None else paper_plan.estimated_seconds(
         cell, max(remaining, 0), args.episodes)
     total += seconds
     lines.append(f'{cell.path:32s} {state.describe(steps):22s} '
                  f'{steps / 1e6:6g}M  ~{seconds / 3600:6.1f} h  '
                  f'{command(cell, args)}')
-  lines.append(f'{len(lines) - 1} cells, ~{total / 3600:.0f} h to go at '
+    if state.problem:
+      lines.append(f'  ! {state.problem}')
+  lines.append(f'{len(cells)} cells, ~{total / 3600:.0f} h to go at '
                f'{paper_plan.AGENT_STEPS_PER_SECOND:,.0f} Ant steps/s '
                '(runners.paper_plan.AGENT_STEPS_PER_SECOND)')
   return '\n'.join(lines)
@@ -323,6 +332,9 @@ def stash(cell: paper_plan.Cell, args: PaperArgs) -> Optional[str]:
   logdir = run_directory(cell, args)
   if is_done(cell, args) or not checkpoints.list_checkpoints(logdir):
     return None
+  state = status(cell, args)
+  if state.state == 'foreign':  # Not to be committed as the cell's.
+    raise ValueError(state.problem)
   folder = partial_directory(cell, args)
   _copy_run(logdir, checkpoints.resolve(logdir), folder)
   return folder
@@ -349,6 +361,8 @@ def run_cell(cell: paper_plan.Cell, args: PaperArgs,
   state = status(cell, args)
   if state.state == 'done':
     return None
+  if state.state == 'foreign':
+    raise ValueError(state.problem)
   log(f'== {cell.path}: {state.describe(budget(cell, args))}')
   if unstash(cell, args):
     log(f'{cell.path}: continues from {partial_directory(cell, args)}')
@@ -380,11 +394,13 @@ def run_plan(args: PaperArgs, plan=None,
   signal that stopped it early, else None."""
   default = PaperArgs()
   if args.budget and (args.results == default.results
-                      or args.runs == default.runs):
+                      or args.runs == default.runs
+                      or args.partial == default.partial):
     raise ValueError('--budget runs are not the plan\'s: give them their '
-                     'own --results and --runs (e.g. /tmp/paper/results '
-                     f'/tmp/paper/runs), not {default.results} or '
-                     f'{default.runs}.')
+                     'own --results, --runs and --partial (e.g. '
+                     '/tmp/paper/results /tmp/paper/runs /tmp/paper/partial),'
+                     f' not {default.results}, {default.runs} or '
+                     f'{default.partial}.')
   # is_done reads no checkpoint, so the JAX-before-Ray rule below holds.
   cells = [cell for cell in selected(args, plan) if not is_done(cell, args)]
   if not cells:

@@ -26,9 +26,10 @@ import fnmatch
 from typing import Any
 
 BUDGET = 15_000_000
-"""Environment steps per cell: the stable learner's evidence budget (the
-issue that stabilised it asked for at most 15M on transport; about 2.6 h
-on the 2-core development machine)."""
+"""Environment steps per trained model: the stable learner's evidence
+budget (the issue that stabilised it asked for at most 15M on transport;
+about 2.6 h on the 2-core development machine). One cell's, except on
+transport, whose push stage takes `PUSH_BUDGET` of it."""
 STAGE_BUDGET = 10_000_000
 """Environment steps of each of the ravine's two pretraining stages."""
 PUSH_BUDGET = 3_000_000

@@ -124,26 +124,50 @@ def _fake_run(logdir, train_args, env_steps):
                'species': [], 'args': train_args.to_dict()}, f)
 
 
-def test_a_run_of_other_settings_is_not_taken_for_the_cell(tmp_path):
+def test_a_run_of_other_settings_is_not_taken_for_the_cell(tmp_path, capsys):
   """A run left from before the plan changed (here transport trained from
-  scratch, where the cell now starts from its push stage) is refused, not
-  evaluated as the cell."""
+  scratch, where the cell now starts from its push stage) is 'foreign':
+  listed with its reason, never trained over, stashed or evaluated."""
   args = _args(tmp_path)
   push, joint = paper_plan.PLAN[:2]
   assert (push.stage, joint.init_from) == ('push', (('ant', push.name),))
   own = paper.train_args(joint, args)
-  _fake_run(paper.run_directory(joint, args), own, joint.budget)
+  logdir = paper.run_directory(joint, args)
+  _fake_run(logdir, own, joint.budget)
   assert paper.status(joint, args).state == 'trained'
-  shutil.rmtree(paper.run_directory(joint, args))
-  _fake_run(paper.run_directory(joint, args),
-            dataclasses.replace(own, init_from=()), joint.budget)
-  with pytest.raises(ValueError, match='started from scratch'):
-    paper.status(joint, args)
+  for started, reason in ((dataclasses.replace(own, init_from=()),
+                           'started from scratch'),
+                          (dataclasses.replace(own, init_from=(
+                              'ant=results/other_probe',)), 'other_probe')):
+    shutil.rmtree(logdir)
+    _fake_run(logdir, started, joint.budget)
+    state = paper.status(joint, args)
+    assert state.state == 'foreign' and reason in state.problem
+    with pytest.raises(ValueError, match=reason):
+      paper.run_cell(joint, args, log=lambda _: None)
+    with pytest.raises(ValueError, match=reason):
+      paper.stash(joint, args)
+    assert not os.path.exists(paper.partial_directory(joint, args))
   _fake_run(paper.run_directory(push, args),
             dataclasses.replace(paper.train_args(push, args), stage='joint'),
             1000)
-  with pytest.raises(ValueError, match='--stage'):
-    paper.status(push, args)
+  assert '--stage' in paper.status(push, args).problem
+  paper.main(['--dry-run', '--only', 'transport/hrl/push/n4/s0',
+              'transport/hrl/n4/s0', '--results', args.results, '--runs',
+              args.runs, '--partial', args.partial])
+  lines = capsys.readouterr().out.splitlines()
+  assert [line.split()[1] for line in lines[1::2][:2]] == ['foreign'] * 2
+  assert lines[2].startswith('  ! ') and 'Move it away' in lines[2]
+  assert lines[-1].startswith('2 cells, ~')
+
+
+def test_quick_runs_keep_off_the_plans_folders(tmp_path):
+  for folder in ('results', 'runs', 'partial'):
+    values = dict(results=str(tmp_path / 'r'), runs=str(tmp_path / 'u'),
+                  partial=str(tmp_path / 'p'), budget=100)
+    del values[folder]  # That one at its default.
+    with pytest.raises(ValueError, match='--budget runs'):
+      paper.run_plan(paper.PaperArgs(**values), log=pytest.fail)
 
 
 def test_the_plan_is_the_papers():
