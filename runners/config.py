@@ -79,10 +79,11 @@ class TrainArgs:
   have only joint."""
   init_from: tuple[str, ...] = _resumable(())
   """Start species from other runs, as SPECIES=PATH pairs (the curricula:
-  transport ant=PUSH_RUN, the ravine pusher=RUN_A crosser=RUN_B); PATH is a run directory (its
-  newest complete checkpoint) or a checkpoint directory. Each named species
-  takes that run's parameters and normalisers with a fresh optimiser; a
-  resumed run continues from its own checkpoint instead."""
+  transport ant=PUSH_RUN, the ravine pusher=RUN_A crosser=RUN_B); PATH is a
+  run directory (its newest complete checkpoint) or a checkpoint directory.
+  Each named species takes that run's parameters and normalisers with a
+  fresh optimiser; a resumed run continues from its own checkpoint
+  instead."""
   n_pushers: int = 2
   """Ravine only: number of pushers."""
   resample_on_reach: bool = False

@@ -9,18 +9,17 @@ The plan (`runners.paper_plan.PLAN`) is data: task x variant x population x
 seed, with budgets and flags. A cell is done when `--results`/<cell>/ holds
 its metrics.csv, its final checkpoint's policy (with the lower layer it was
 trained with) and one `eval_n<N>.json` per evaluated population; done cells
-are skipped, so the committed results are the plan's memory across
-sessions. A
-cell whose run directory (`--runs`/<cell>/) has a checkpoint continues from
-it (`coop-train --resume`), one whose training has finished is only
-evaluated. Evaluation is the paper's protocol: the final checkpoint, `--episodes`
-(100) episodes from seed `--eval-seed` (1000), which training never uses.
-Training and evaluation run in this process (`learner_loop.train`,
-`evaluate.evaluate`). Ctrl-C / SIGTERM stop the running cell after a
-checkpoint (exit status 128 + the signal's number); run the same command
-again to continue. `coop-paper --stash` copies unfinished runs into
-`--partial` (results/paper_partial) to be committed at the end of a
-session; the next session's `coop-paper` resumes from them. See
+are skipped, so the committed results are the plan's memory across sessions.
+A cell whose run directory (`--runs`/<cell>/) has a checkpoint continues
+from it (`coop-train --resume`), one whose training has finished is only
+evaluated. Evaluation is the paper's protocol: the final checkpoint,
+`--episodes` (100) episodes from seed `--eval-seed` (1000), which training
+never uses. Training and evaluation run in this process
+(`learner_loop.train`, `evaluate.evaluate`). Ctrl-C / SIGTERM stop the
+running cell after a checkpoint (exit status 128 + the signal's number); run
+the same command again to continue. `coop-paper --stash` copies unfinished
+runs into `--partial` (results/paper_partial) to be committed at the end of
+a session; the next session's `coop-paper` resumes from them. See
 docs/paper.md.
 """
 import dataclasses
@@ -181,36 +180,37 @@ def status(cell: paper_plan.Cell, args: PaperArgs) -> Status:
       return Status('todo')
   saved = checkpoints.read_state(checkpoints.resolve(logdir))
   steps = saved['env_steps']
-  try:
-    if 'args' in saved:
-      check_run(cell, args, saved['args'], logdir)
-  except ValueError as error:
-    return Status('foreign', steps, str(error))
+  differs = other_settings(cell, args, saved.get('args'))
+  if differs:
+    return Status('foreign', steps, f'{logdir} is not a run of cell '
+                  f'{cell.path}: {differs} Move it away (or give coop-paper '
+                  'other --runs).')
   return Status('trained' if steps >= budget(cell, args) else 'partial',
                 steps)
 
 
-def check_run(cell: paper_plan.Cell, args: PaperArgs, saved: dict,
-              logdir: str) -> None:
-  """ValueError unless the run in `logdir` (its saved `TrainArgs` dict) is
-  the cell's: the same settings as `coop-train --resume` requires, and
-  started from the same species' stages (a run trained before the plan
-  changed is not taken for a cell of the new plan)."""
+def other_settings(cell: paper_plan.Cell, args: PaperArgs,
+                   saved: Optional[dict]) -> str:
+  """How a run (its saved `TrainArgs` dict) differs from the cell's, or ''
+  when it is the cell's: the same settings as `coop-train --resume`
+  requires, and started from the cell's own stage cells (a run trained
+  before the plan changed is not taken for a cell of the new plan). None
+  (a format-1 state saved no settings) compares as the cell's."""
   from runners import config as config_lib  # pylint: disable=g-import-not-at-top
-  expected = train_args(cell, args)
+  if saved is None:
+    return ''
   try:
-    config_lib.check_resumable(saved, expected)
-    started = config_lib.TrainArgs.from_dict(saved).init_sources()
-    stages = dict(cell.init_from)
-    if set(started) != set(stages) or any(  # Its stage cell's folder.
-        stages[s] not in os.path.normpath(path).split(os.sep)
-        for s, path in started.items()):
-      raise ValueError(f'the run started from {started or "scratch"}, the '
-                       f'cell from {stages or "scratch"}.')
+    config_lib.check_resumable(saved, train_args(cell, args))
   except ValueError as error:
-    raise ValueError(f'{logdir} is not a run of cell {cell.path}: {error} '
-                     'Move it away (or give coop-paper other --runs).'
-                     ) from None
+    return str(error)
+  started = config_lib.TrainArgs.from_dict(saved).init_sources()
+  stages = dict(cell.init_from)
+  if set(started) != set(stages) or any(  # Its stage cell's folder.
+      stages[s] not in os.path.normpath(path).split(os.sep)
+      for s, path in started.items()):
+    return (f'the run started from {started or "scratch"}, the cell from '
+            f'{stages or "scratch"}.')
+  return ''
 
 
 def selected(args: PaperArgs, plan=None) -> list[paper_plan.Cell]:
