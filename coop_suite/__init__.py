@@ -59,7 +59,7 @@ def _headless_renderer():
 
 _headless_renderer()
 
-__all__ = ["load", "TASKS", "CoopEnvironment", "is_truncation",
+__all__ = ["load", "check_options", "TASKS", "CoopEnvironment", "is_truncation",
            "pettingzoo_env", "rllib_env", "agent_range"]
 
 
@@ -99,6 +99,31 @@ def load(task, n_agents=None, *, seed=None, time_limit=None, fast_path=True,
       option out of its range (e.g. `time_limit` not a finite number > 0).
     TypeError: non-integer agent count or seed.
   """
+  task_instance, config = _build_task(task, n_agents, seed, time_limit,
+                                      kwargs)
+  env = CoopEnvironment(task_instance, time_limit=config.time_limit,
+                        random_state=np.random.RandomState(seed),
+                        fast_path=fast_path)
+  # What pickling and copying rebuild the environment from.
+  env.load_arguments = ((task, n_agents),
+                        dict(seed=seed, time_limit=time_limit,
+                             fast_path=fast_path, **kwargs))
+  return env
+
+
+def check_options(task, n_agents=None, *, seed=None, time_limit=None,
+                  **kwargs):
+  """Raises what `load` with these arguments would raise, without building
+  the environment (the task is built, the model is not compiled; ~0.1 s).
+
+  For callers that must refuse bad options before acting on them, e.g.
+  `coop-train` before it creates its run directory.
+  """
+  _build_task(task, n_agents, seed, time_limit, kwargs)
+
+
+def _build_task(task, n_agents, seed, time_limit, kwargs):
+  """(the task, its config) for `load`'s arguments; raises on bad ones."""
   cls, config_cls, default_agents = TASKS[_check_task(task)]
   if n_agents is None:
     n_agents = default_agents
@@ -128,15 +153,7 @@ def load(task, n_agents=None, *, seed=None, time_limit=None, fast_path=True,
     # The task config checks the range (finite, > 0).
     config_kwargs["time_limit"] = float(time_limit)
   config = config_cls(**config_kwargs)
-  task_instance = cls(n_agents, config=config, **task_kwargs)
-  env = CoopEnvironment(task_instance, time_limit=config.time_limit,
-                        random_state=np.random.RandomState(seed),
-                        fast_path=fast_path)
-  # What pickling and copying rebuild the environment from.
-  env.load_arguments = ((task, n_agents),
-                        dict(seed=seed, time_limit=time_limit,
-                             fast_path=fast_path, **kwargs))
-  return env
+  return cls(n_agents, config=config, **task_kwargs), config
 
 
 def pettingzoo_env(task, n_agents=None, *, flatten=False, render_mode=None,

@@ -117,6 +117,10 @@ def train(args: config_lib.TrainArgs,
 
   `on_update(update, row, pool)` is called after every update.
   """
+  # Options the task refuses (a stage it lacks, an agent count out of its
+  # range) fail here, before the run directory exists.
+  import coop_suite  # pylint: disable=g-import-not-at-top
+  coop_suite.check_options(args.task, args.n_agents, **args.env_options())
   # One writer per run directory, from the check that it is free to the end.
   with run_dir.RunLock(args.logdir):
     # Ray first, before the checkpoints are read (orbax starts JAX): its

@@ -41,6 +41,22 @@ def test_unknown_option_names_the_allowed_ones():
     coop_suite.load("transport", 2, seed=1.5)
 
 
+@pytest.mark.parametrize("args,kwargs,error", [
+    (("tranport", 4), {}, ValueError), (("ravine", 9), {}, ValueError),
+    (("transport", 2.0), {}, TypeError),
+    (("transport", 2), {"stage": "pushers"}, ValueError),
+    (("ravine", 2), {"n_pushers": 0}, ValueError),
+    (("transport", 2), {"time_limit": -1.0}, ValueError),
+    (("transport", 2), {"seed": 1.5}, TypeError)])
+def test_check_options_raises_what_load_raises(args, kwargs, error):
+  with pytest.raises(error) as from_load:
+    coop_suite.load(*args, **kwargs)
+  with pytest.raises(error) as from_check:
+    coop_suite.check_options(*args, **kwargs)
+  assert str(from_check.value) == str(from_load.value)
+  coop_suite.check_options("ravine", 3, stage="crossers", n_pushers=1)
+
+
 @pytest.fixture(name="env")
 def env_fixture():
   env = coop_suite.load("transport", 3, seed=0)

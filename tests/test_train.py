@@ -105,6 +105,19 @@ def hrl_run(tmp_path_factory, controller):
   return logdir
 
 
+def test_a_stage_the_task_lacks_is_refused_before_the_run_starts(
+    controller, tmp_path, capsys):
+  logdir = tmp_path / 'pushers'
+  with pytest.raises(SystemExit) as exit_info:
+    train.main(['--task', 'transport', '--stage', 'pushers', '--logdir',
+                str(logdir), *_argv(controller, STEPS)])
+  assert exit_info.value.code == 2
+  out, err = capsys.readouterr()
+  assert "stage 'pushers'" in err
+  assert 'Writing to' not in out  # Refused before the run was started.
+  assert not logdir.exists()
+
+
 @pytest.mark.parametrize('agent', sorted(VARIANT_TASKS))
 def test_variant_trains_in_process(agent, controller, hrl_run, tmp_path):
   # 'flat' acts every control step: 8 env steps per update.
