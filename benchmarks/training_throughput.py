@@ -17,7 +17,11 @@ median over the blocks of raw time / measured time. Prints:
   environment + lower layer, copy by copy / raw
                                    (each copy's `CommandWrapper.step`)
   pipeline with N actors / (N x raw), N = 1, 2     (target >= 0.60 at 2)
-  the learner's share of a 2-actor update
+  the learner's share of an update with the most actors
+
+`--actors 1 2 4 8 14` measures the pipeline for those actor counts instead
+(the scaling curve, on a machine with that many cores; the one-core raw
+rate stays the reference).
 
 The one-core loops run in a child process pinned to one CPU with the
 actors' single-threaded settings (`actor_pool.ACTOR_ENV_VARS`); the
@@ -189,9 +193,13 @@ def main(argv=None):
                       help='control steps per timed block (all copies)')
   parser.add_argument('--blocks', type=int, default=9)
   parser.add_argument('--controller', default='')
+  parser.add_argument('--actors', type=int, nargs='+', default=[1, 2],
+                      help='actor counts of the pipeline rows')
   parser.add_argument('--one-core', action='store_true',
                       help=argparse.SUPPRESS)  # The child's part.
   args = parser.parse_args(argv)
+  if min(args.actors) < 1:
+    parser.error(f'--actors must be >= 1, got {args.actors}')
   if args.one_core:
     print(json.dumps(one_core(args)))
     return
@@ -203,10 +211,11 @@ def main(argv=None):
       capture_output=True, text=True)
   single = json.loads(child.stdout.strip().splitlines()[-1])
   raw = single['raw_steps_per_s']
-  actor_pool.init_ray(num_cpus=max(2, os.cpu_count()))
+  actor_pool.init_ray(num_cpus=max(2, os.cpu_count(), *args.actors))
+  pipelines = {}
   with tempfile.TemporaryDirectory() as tmp:
-    one, _ = pipeline(args, 1, os.path.join(tmp, 'one'))
-    two, learner_share = pipeline(args, 2, os.path.join(tmp, 'two'))
+    for n in args.actors:
+      pipelines[n] = pipeline(args, n, os.path.join(tmp, str(n)))
   print(f'{args.task}, {args.n_agents} agents, {args.envs_per_actor} copies '
         f'per actor, {os.cpu_count()} CPUs; raw {raw:.0f} control steps/s '
         'on one core')
@@ -216,10 +225,13 @@ def main(argv=None):
       ('composer step, [n, 8] array / raw', single['composer_array'], ''),
       ('env + lower layer, lockstep / raw', single['lockstep'], '>= 0.70'),
       ('env + lower layer, copy by copy / raw', single['copy_by_copy'], ''),
-      ('pipeline, 1 actor / raw', one / raw, ''),
-      ('pipeline, 2 actors / (2 x raw)', two / (2 * raw), '>= 0.60'),
-      ("learner's share of a 2-actor update", learner_share, ''),
   ]
+  for n, (rate, _) in pipelines.items():
+    lines.append((f'pipeline, {n} actor{"s" * (n > 1)} / ({n} x raw)',
+                  rate / (n * raw), '>= 0.60' if n == 2 else ''))
+  most = max(pipelines)
+  lines.append((f"learner's share of a {most}-actor update",
+                pipelines[most][1], ''))
   for name, value, target in lines:
     print(f'{name:42s} {value:5.2f}  {target}')
 
