@@ -61,14 +61,17 @@ class _Controls:
     self.physics = env.physics
     self.start = mujoco.MjData(self.physics.model.ptr)
     self.controls = []
-    step = env.step
     data = self.physics.data.ptr  # MuJoCo's own: dm_control's view costs.
+    # `step_outcome` ends every step, whole or in phases; older commits (the
+    # "before" figures of docs/performance.md) step only through `step`.
+    name = 'step_outcome' if hasattr(env, 'step_outcome') else 'step'
+    inner = getattr(env, name)
 
-    def recording(action, observe=True):
-      timestep = step(action, observe)
+    def recording(*args, **kwargs):
+      timestep = inner(*args, **kwargs)
       self.controls.append(data.ctrl.copy())
       return timestep
-    env.step = recording
+    setattr(env, name, recording)
     self.begin()
 
   def begin(self):

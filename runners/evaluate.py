@@ -206,7 +206,14 @@ class _Filming:
     return timestep
 
   def step(self, action, observe=True):
-    timestep = self._env.step(action, observe=observe)
+    return self._filmed(self._env.step(action, observe=observe))
+
+  def step_outcome(self, observe=True):
+    # A command layer steps in two phases (`CoopEnvironment.step_physics`
+    # passes through); a step is filmed once its outcome is known.
+    return self._filmed(self._env.step_outcome(observe))
+
+  def _filmed(self, timestep):
     self._film()
     if timestep.last() and not self.done:
       self.done = True
@@ -232,8 +239,10 @@ def film(spec, config, models, seed: int, path: str, size=(640, 480),
       or filming[-1])
   try:
     actors = _actors(batch, models, seed, deterministic)
-    while not filming[0].done:
-      batch.step(_act(actors, batch, models))
+    ended = []
+    while not ended:  # The batch's word, not the film's: a step the film
+      # missed must not make it play forever.
+      _, ended, _ = batch.step(_act(actors, batch, models))
   finally:
     batch.close()
   return filming[0].frames, filming[0].success

@@ -7,6 +7,7 @@ for bit, on every task: the fast path only takes Python out of the step.
 """
 
 import numpy as np
+import pytest
 
 import coop_suite
 
@@ -19,9 +20,10 @@ _CASES = [("transport", 2, {}), ("corridor", 2, {}),
           ("walk_to_target", 1, {}), ("walk_velocity", 1, {})]
 
 
-def _rollout(task, n_agents, options, fast_path):
+def _rollout(task, n_agents, options, fast_path, phases=False):
   """Two episodes of fixed-seed random actions: every timestep's fields,
-  the global state, and the episode metrics at each episode's end."""
+  the global state, and the episode metrics at each episode's end. With
+  `phases`, each step is `step_physics` then `step_outcome`."""
   env = coop_suite.load(task, n_agents, seed=5, time_limit=0.6,
                         fast_path=fast_path, **options)
   rng = np.random.RandomState(11)
@@ -30,7 +32,12 @@ def _rollout(task, n_agents, options, fast_path):
     timestep = env.reset()
     record.append(timestep)
     while not timestep.last():
-      timestep = env.step(rng.uniform(-1, 1, (env.n_agents, 8)))
+      action = rng.uniform(-1, 1, (env.n_agents, 8))
+      if phases:
+        env.step_physics(action)
+        timestep = env.step_outcome()
+      else:
+        timestep = env.step(action)
       record.append((timestep, env.task.global_state(env.physics)))
     record.append(env.episode_metrics())
   return record
@@ -57,3 +64,34 @@ def test_fast_path_is_plain_composer_bit_for_bit():
     plain = _rollout(task, n_agents, options, fast_path=False)
     assert len(fast) == 2 * (1 + 12 + 1), (task, len(fast))  # 0.6 s / 50 ms.
     _assert_identical(fast, plain, f"{task} {options}")
+
+
+def test_a_step_in_its_two_phases_is_the_step():
+  for task, n_agents, options in _CASES[:3]:
+    whole = _rollout(task, n_agents, options, fast_path=True)
+    for fast_path in (True, False):
+      phases = _rollout(task, n_agents, options, fast_path, phases=True)
+      _assert_identical(phases, whole, f"{task} {options} {fast_path}")
+
+
+@pytest.mark.parametrize("fast_path", [True, False])
+def test_the_phases_refuse_to_run_out_of_order(fast_path):
+  env = coop_suite.load("transport", 2, seed=0, time_limit=0.1,
+                        fast_path=fast_path)
+  env.reset()
+  with pytest.raises(RuntimeError, match="step_physics"):
+    env.step_outcome()
+  action = np.zeros((2, 8))
+  env.step_physics(action)
+  env.step_outcome()
+  with pytest.raises(RuntimeError, match="step_physics"):
+    env.step_outcome()  # One outcome per physics step.
+  env.step_physics(action)
+  assert env.step_outcome().last()
+  with pytest.raises(RuntimeError, match="reset"):
+    env.step_physics(action)
+  env.reset()
+  env.step_physics(action)  # A step begun and abandoned by a reset...
+  env.reset()
+  with pytest.raises(RuntimeError, match="step_physics"):
+    env.step_outcome()  # ...leaves nothing to end.

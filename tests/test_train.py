@@ -251,6 +251,14 @@ def test_evaluation_prints_success_rate_and_films(hrl_run, tmp_path, capsys):
   assert video.stat().st_size > 0
 
 
+def test_the_filmed_episode_has_a_frame_per_control_step(hrl_run, tmp_path):
+  args = evaluate.EvalArgs(checkpoint=[hrl_run], time_limit=1.0)
+  spec, config, models, _ = evaluate.load_model(hrl_run, args)
+  frames, _ = evaluate.film(spec, config, models, 0, str(tmp_path / 'e.mp4'),
+                            (64, 48))
+  assert frames == 1 + 20  # The first observation, then 1 s of 50 ms steps.
+
+
 def test_the_stability_figures_are_logged_and_checkpointed(hrl_run):
   rows = _rows(hrl_run)
   for name in ('value_loss', 'approx_kl', 'learning_rate', 'action_std',

@@ -155,7 +155,8 @@ class CommandWrapper:
   # until it returns True, then `end`. `runners.rollout.EnvBatch` runs the
   # same phases for all its copies at once, so that one controller call per
   # low-level step serves every copy (`controller_input(out=...)` writes
-  # into the rows of one shared array).
+  # into the rows of one shared array), and `advance` in its two phases
+  # (every copy's physics, then every copy's outcome).
 
   def begin(self, commands) -> None:
     """Starts a command period with `commands` [n_agents, 2]."""
@@ -201,11 +202,20 @@ class CommandWrapper:
   def advance(self, actions) -> bool:
     """One low-level step with joint actions [n_agents, 8]; True when the
     period is over (its last step, or the episode ended)."""
+    self.advance_physics(actions)
+    return self.advance_outcome()
+
+  def advance_physics(self, actions) -> None:
+    """`advance`'s first phase: the environment's `step_physics`."""
+    self._env.step_physics(actions)
+
+  def advance_outcome(self) -> bool:
+    """`advance`'s second phase (`step_outcome`): what `advance` returns."""
     self._period_steps += 1
     last_step = self._period_steps == self._low_level_steps
     # Only the period's last observation is returned: the steps before it
     # skip the exteroception (the environment still observes a LAST step).
-    timestep = self._env.step(actions, observe=last_step)
+    timestep = self._env.step_outcome(observe=last_step)
     self._period_reward += np.asarray(timestep.reward, np.float64)
     self._period_discount *= float(timestep.discount)
     self._period_last = timestep

@@ -59,6 +59,7 @@ class FusedStep:
     self._env = env
     self.substeps = substeps
     """The `SubstepRunner`, or None where `physics.step` runs them."""
+    self._diverged = False  # Whether the last `step_physics` diverged.
 
   @classmethod
   def make(cls, env):
@@ -79,6 +80,15 @@ class FusedStep:
 
   def step(self, action, observe=True):
     """One control step of the validated `action`; a `dm_env.TimeStep`."""
+    self.step_physics(action)
+    return self.step_outcome(observe)
+
+  # `step` in two phases, for copies stepped in lockstep: each copy's
+  # physics, then each copy's outcome, so that each phase's code stays in
+  # the caches across copies (`runners.rollout.EnvBatch`).
+
+  def step_physics(self, action):
+    """The first phase of `step`: the hooks before it, then the substeps."""
     env = self._env
     # pylint: disable=protected-access
     env._hooks.before_step(env._physics_proxy, action, env._random_state)
@@ -87,15 +97,21 @@ class FusedStep:
         self.substeps.step(env._n_sub_steps)
       else:
         env._physics.step(env._n_sub_steps)
-      diverged = False
+      self._diverged = False
     except control.PhysicsError as e:
       if env._raise_exception_on_physics_error:
         raise
       logging.warning(e)
-      diverged = True
+      self._diverged = True
+
+  def step_outcome(self, observe=True):
+    """The second phase of `step`: the hooks after it, reward, discount,
+    termination and (where asked or at the end) the observation."""
+    env = self._env
+    # pylint: disable=protected-access
     env._hooks.after_step(env._physics_proxy, env._random_state)
     task = env._task
-    if diverged:
+    if self._diverged:
       reward, discount, terminating = 0.0, 0.0, True
     else:
       reward = task.get_reward(env._physics_proxy)
