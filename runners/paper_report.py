@@ -60,10 +60,12 @@ def summarize(cells, n_agents: int, args: paper.PaperArgs
   `n_agents`: pooled over all episodes, with the spread between models
   (`evaluate.mean_and_error`, as coop-eval does), and how many of the
   declared models are in ('models', 'declared')."""
-  evaluations = [e for e in (read_evaluation(c, n_agents, args)
-                             for c in cells) if e is not None]
+  evaluated = [(c, e) for c, e in ((c, read_evaluation(c, n_agents, args))
+                                    for c in cells) if e is not None]
+  evaluations = [e for _, e in evaluated]
   out = {'models': len(evaluations), 'declared': len(cells),
-         'env_steps': sorted({e['env_steps'] for e in evaluations})}
+         'env_steps': sorted({_model_steps(c, e, args)
+                              for c, e in evaluated})}
   if not evaluations:
     return out
   for metric in ('success', 'return'):
@@ -73,6 +75,21 @@ def summarize(cells, n_agents: int, args: paper.PaperArgs
     out[f'{metric}_spread'] = evaluate.mean_and_error(
         [sum(v) / len(v) for v in per_model])[1]
   return out
+
+
+def _model_steps(cell, evaluation, args) -> tuple[int, ...]:
+  """A model's environment steps: its run's, then those of the stage cells
+  it started from (the curriculum; -1 where a stage has no evaluation)."""
+  steps = [evaluation['env_steps']]
+  for _, stage in cell.init_from:
+    path = os.path.join(args.results, stage,
+                        paper.EVAL_FILE.format(cell.n_agents))
+    if os.path.exists(path):
+      with open(path) as f:
+        steps.append(json.load(f)['env_steps'])
+    else:
+      steps.append(-1)
+  return tuple(steps)
 
 
 def _rate(value, error) -> str:
@@ -86,7 +103,8 @@ def _ours(summary, metric='success') -> list[str]:
             f'0/{summary["declared"]}', '']
   scale = 100 if metric == 'success' else 1
   spread = summary[f'{metric}_spread'] * scale
-  steps = '/'.join(_steps(s) for s in summary['env_steps'])
+  steps = '/'.join(' + '.join(_steps(s) if s >= 0 else '?' for s in model)
+                   for model in summary['env_steps'])
   return [_rate(summary[metric] * scale, summary[f'{metric}_se'] * scale)
           if metric == 'success' else
           f'{summary[metric]:.0f} +- {summary[f"{metric}_se"]:.0f}',
@@ -216,7 +234,9 @@ def report(args: paper.PaperArgs, plan=None) -> str:
       'edit by hand). Success rate +- standard error over all models x '
       f'episodes ({args.episodes} episodes per model from seed '
       f'{args.eval_seed}, final checkpoints); "between models": standard '
-      'error of the per-model rates; references: docs/baselines.md.', '']
+      'error of the per-model rates; "env steps": the run\'s, + its '
+      'curriculum stages\' (transport\'s push stage; the ravine\'s pushers '
+      'and crossers stages); references: docs/baselines.md.', '']
   table1 = [(t, a, n) for t, n in paper_plan.TABLE1_TASKS
             for a in ('hrl', 'no_memory', 'flat')
             if _models(plan, 'table1', t, a, n)]

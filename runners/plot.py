@@ -12,6 +12,13 @@ comes from run directories. One run: its curve. Several runs (the seeds of
 one cell): each run thin, their mean bold in a band of +- one standard error
 between the runs, over the steps that every run covers (each curve
 interpolated linearly at the union of the runs' logged steps).
+
+The stages of one model are one curve: `A+B` is run B continuing run A
+(B's environment steps and wall time counted after A's), e.g. transport's
+push stage and the joint run started from it:
+
+    python -m runners.plot results/paper/transport_hrl_push_n4_s0+results/paper/transport_hrl_n4_s0 \
+        --columns success --out docs/images/transport_curriculum_s0.png
 """
 
 import csv
@@ -34,7 +41,8 @@ class PlotArgs:
   """What to plot (every field is a CLI flag; the runs are positional)."""
 
   runs: Annotated[tuple[str, ...], tyro.conf.Positional]
-  """Run directories (or published results), each with a metrics.csv."""
+  """Run directories (or published results), each with a metrics.csv;
+  `A+B`: run B continuing run A, one curve."""
   out: str
   """The PNG to write."""
   columns: tuple[str, ...] = ("return", "success")
@@ -63,6 +71,32 @@ def read_metrics(run_dir):
           continue
       rows.append(parsed)
   return rows
+
+
+def stages(run):
+  """The run directories of a run argument: `A+B` -> [A, B]; a directory
+  whose own name holds a '+' is one run."""
+  return [run] if os.path.exists(run) else run.split(STAGES)
+
+
+def read_stages(run):
+  """`read_metrics` of a run, or of the stages of one model written `A+B`
+  (B's env steps and wall time after A's last ones)."""
+  rows = []
+  for stage in stages(run):
+    stage_rows = read_metrics(stage)
+    if rows:
+      offset = {key: rows[-1][key] for key in ("env_steps", "wall_time")
+                if key in rows[-1]}
+      stage_rows = [{**r, **{key: r[key] + start
+                             for key, start in offset.items() if key in r}}
+                    for r in stage_rows]
+    rows += stage_rows
+  return rows
+
+
+STAGES = "+"
+"""Joins the stages of one model in a run argument (`read_stages`)."""
 
 
 def _curve(rows, column):
@@ -96,7 +130,7 @@ def _read_runs(runs, columns):
   `columns`."""
   all_rows = []
   for run in runs:
-    rows = read_metrics(run)
+    rows = read_stages(run)
     if not rows:
       raise ValueError(f"{run}/metrics.csv has no rows.")
     missing = [c for c in columns if not any(c in r for r in rows)]
@@ -130,7 +164,8 @@ def plot(runs: Union[str, Sequence[str]], columns, out, title=None):
   runs = [runs] if isinstance(runs, str) else list(runs)
   all_rows = _read_runs(runs, columns)
   fig, axes = _panels(columns)
-  names = [os.path.basename(os.path.normpath(run)) for run in runs]
+  names = ["+".join(os.path.basename(os.path.normpath(stage))
+                    for stage in stages(run)) for run in runs]
   for ax, column in zip(axes, columns):
     curves = [_curve(rows, column) for rows in all_rows]
     if len(curves) == 1:

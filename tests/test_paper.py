@@ -76,7 +76,7 @@ def _evaluation(cell, n_agents, successes, env_steps=20_000_000):
           'marl_eval': marl_eval.layout([model])}
 
 
-def _commit(cell, args, evaluations):
+def _commit(cell, args, evaluations, env_steps=20_000_000):
   """Writes a done cell into args.results: {population: successes}."""
   folder = paper.results_directory(cell, args)
   os.makedirs(folder, exist_ok=True)
@@ -85,7 +85,7 @@ def _commit(cell, args, evaluations):
             f'2,32,50.0,{cell.seed / 10}\n')
   for n, successes in evaluations.items():
     evaluate.write_json(os.path.join(folder, paper.EVAL_FILE.format(n)),
-                        _evaluation(cell, n, successes))
+                        _evaluation(cell, n, successes, env_steps))
 
 
 def test_dry_run_prints_every_cell_with_its_status(tmp_path, capsys):
@@ -277,15 +277,19 @@ def test_report_rebuilds_the_tables_from_committed_results(tmp_path, capsys):
                          5: [0] * 4})
   _commit(hrl[1], args, {4: [1, 0, 0, 0], 2: [0] * 4, 3: [1] * 4,
                          5: [0] * 4})
+  # Seed 0's push stage is committed, seed 1's is not (its steps read '?').
+  (_, push), = hrl[0].init_from
+  _commit(next(c for c in paper_plan.PLAN if c.name == push), args,
+          {4: [0] * 4}, env_steps=3_000_000)
   text = paper_report.report(args)
   # 3 of 8 episodes: 37.5% +- std(ddof=1) / sqrt(8) = 18.3; the models'
   # rates 50% and 25%: +- 12.5 between them.
   row = next(line for line in text.splitlines()
              if line.startswith('| transport (4 Ants) | HRL |'))
   assert row == ('| transport (4 Ants) | HRL | 37.5% +- 18.3 | +- 12.5 | 2/5 '
-                 '| 20M | 76.8% +- 5.3 | 55% +- 5 | 54% +- 5 |')
-  assert ('| transport | 2 Ants | 12.5% +- 12.5 | +- 12.5 | 2/5 | 20M | '
-          '12.8% +- 5.6 | 12% +- 3 | 12% +- 3 |') in text
+                 '| 20M + ?/20M + 3M | 76.8% +- 5.3 | 55% +- 5 | 54% +- 5 |')
+  assert ('| transport | 2 Ants | 12.5% +- 12.5 | +- 12.5 | 2/5 | '
+          '20M + ?/20M + 3M | 12.8% +- 5.6 | 12% +- 3 | 12% +- 3 |') in text
   assert '| corridor (4 Ants) | HRL | not run |  | 0/5 |' in text
   assert '| 4 | 37.5% +- 18.3 | +- 12.5 | 2/3 |' in text  # Fig. 4a.
   assert 'coop-train --seed 1 --actors 0 --total-steps 12000000 --logdir' in text
@@ -313,7 +317,8 @@ def test_report_rebuilds_the_tables_from_committed_results(tmp_path, capsys):
   assert imageio.v2.imread(images / 'table1_transport.png').ndim == 3
   data = json.loads((tmp_path / 'all.json').read_text())
   marl_eval.check(data)
-  assert sorted(data['coop_suite']) == [f'transport_n{n}' for n in (2, 3, 4, 5)]
+  assert sorted(data['coop_suite']) == [  # The push stage is its own task.
+      *[f'transport_n{n}' for n in (2, 3, 4, 5)], 'transport_push_n4']
   assert sorted(data['coop_suite']['transport_n4']['hrl']) == ['seed_0',
                                                                'seed_1']
   assert 'Wrote the tables' in capsys.readouterr().out

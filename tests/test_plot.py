@@ -50,3 +50,18 @@ def test_several_runs_give_their_mean_and_band(tmp_path, capsys):
     plot.main([a, str(tmp_path / "missing"), "--out", str(out)])
   assert exit_info.value.code == 2
   assert "runners.plot: error" in capsys.readouterr().err
+
+
+def test_the_stages_of_one_model_are_one_curve(tmp_path, capsys):
+  push = _run(tmp_path / "push", [(1000, 1.0, 0.0), (2000, 2.0, 0.0)])
+  joint = _run(tmp_path / "joint", [(500, 3.0, 0.5), (1500, 4.0, 1.0)])
+  rows = plot.read_stages(f"{push}+{joint}")
+  assert [r["env_steps"] for r in rows] == [1000, 2000, 2500, 3500]
+  assert [r["wall_time"] for r in rows] == [1.0, 2.0, 3.0, 4.0]
+  assert [r["return"] for r in rows] == [1.0, 2.0, 3.0, 4.0]
+  out = tmp_path / "stages.png"
+  plot.main([f"{push}+{joint}", "--out", str(out)])
+  assert imageio.v2.imread(out).ndim == 3
+  with pytest.raises(SystemExit):
+    plot.main([f"{push}+{tmp_path / 'nope'}", "--out", str(out)])
+  assert "nope" in capsys.readouterr().err
