@@ -126,6 +126,7 @@ class FlatEnv:
     self.env = env
     self._config = locomotion.LocomotionConfig()
     self._sums = {}
+    self._actions = None  # Those of a step in its two phases.
 
   def __getattr__(self, name):  # task, physics, specs, control_timestep...
     return getattr(self.env, name)
@@ -135,8 +136,20 @@ class FlatEnv:
     return self.env.reset()
 
   def step(self, actions):
+    return self._with_terms(self.env.step(actions), actions)
+
+  def step_physics(self, actions):
+    """`CoopEnvironment.step_physics` (for copies stepped in lockstep)."""
+    self.env.step_physics(actions)
+    self._actions = actions
+
+  def step_outcome(self, observe=True):
+    """`CoopEnvironment.step_outcome`, its rewards with the terms."""
+    actions, self._actions = self._actions, None
+    return self._with_terms(self.env.step_outcome(observe), actions)
+
+  def _with_terms(self, timestep, actions):
     from coop_suite.tasks import rewards  # pylint: disable=g-import-not-at-top
-    timestep = self.env.step(actions)
     if timestep.first() or self.env.physics_diverged:
       return timestep
     task = self.env.task

@@ -158,9 +158,12 @@ class EnvBatch:
     lower-layer call per low-level step for all copies and agents, fed by
     one array whose rows the copies fill (a copy whose period ended early
     keeps its last rows, so the call's shape, and its compilation, stay
-    the same)."""
+    the same). Every low-level step goes in its two phases: all copies'
+    physics, then all copies' outcomes (`CoopEnvironment.step_physics`)."""
     if self._controller is None:
-      return [env.step(a) for env, a in zip(self.envs, actions)]
+      for env, a in zip(self.envs, actions):
+        env.step_physics(a)
+      return [env.step_outcome() for env in self.envs]
     for env, a in zip(self.envs, actions):
       env.begin(a)
     n = self.envs[0].n_agents

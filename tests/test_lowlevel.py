@@ -475,3 +475,41 @@ def test_copies_in_lockstep_step_exactly_as_each_copy_alone():
   assert ended == 2
   assert calls[:10] == [(4, batch.envs[0].controller.observation_size)] * 10
   assert len(calls) == 10 + 10 + 4 + 10
+
+
+def test_flat_copies_stepped_in_phases_step_as_each_copy_alone():
+  """Joint-action copies (`FlatEnv`, the 'flat' variant) go through
+  `EnvBatch` in the two phases of a step; rewards (locomotion terms
+  included), discounts, observations and episode metrics equal each copy
+  stepped alone, through the time limit and the reset after it."""
+  from runners import config as config_lib  # pylint: disable=g-import-not-at-top
+  from runners import learner_loop  # pylint: disable=g-import-not-at-top
+  from runners import rollout  # pylint: disable=g-import-not-at-top
+  args = config_lib.train_args(task='transport', n_agents=2, agent='flat',
+                               time_limit=0.3)
+  spec = learner_loop.environment_spec(args)
+  batch = rollout.EnvBatch(spec, args.hierarchy, [3, 4])
+  alone = [spec.make(seed) for seed in (3, 4)]
+  for env in alone:
+    env.reset()
+  rng = np.random.default_rng(0)
+  ended = []
+  for _ in range(8):  # 0.3 s episodes of 50 ms steps: 6 steps each.
+    actions = rng.uniform(-1, 1, (4, 8))
+    steps, episodes, _ = batch.step({'ant': actions})
+    ended += episodes
+    for e, env in enumerate(alone):
+      timestep = env.step(actions[2 * e:2 * e + 2])
+      np.testing.assert_array_equal(steps['ant'].reward[2 * e:2 * e + 2],
+                                    timestep.reward)
+      np.testing.assert_array_equal(steps['ant'].discount[2 * e],
+                                    timestep.discount)
+      if timestep.last():
+        metrics = next(m for m in ended if m['env'] == e)
+        assert metrics['reward/alive'] != 0.0  # The locomotion terms.
+        assert {**env.episode_metrics(), 'env': e} == metrics
+        timestep = env.reset()
+      for got, want in zip(batch._observations[e], timestep.observation):  # pylint: disable=protected-access
+        for key in want:
+          np.testing.assert_array_equal(got[key], want[key], err_msg=key)
+  assert len(ended) == 2
