@@ -73,6 +73,10 @@ def read_metrics(run_dir):
   return rows
 
 
+STAGES = "+"
+"""Joins the stages of one model in a run argument (`read_stages`)."""
+
+
 def stages(run):
   """The run directories of a run argument: `A+B` -> [A, B]; a directory
   whose own name holds a '+' is one run."""
@@ -94,9 +98,6 @@ def read_stages(run):
     rows += stage_rows
   return rows
 
-
-STAGES = "+"
-"""Joins the stages of one model in a run argument (`read_stages`)."""
 
 
 def _curve(rows, column):
@@ -164,7 +165,7 @@ def plot(runs: Union[str, Sequence[str]], columns, out, title=None):
   runs = [runs] if isinstance(runs, str) else list(runs)
   all_rows = _read_runs(runs, columns)
   fig, axes = _panels(columns)
-  names = ["+".join(os.path.basename(os.path.normpath(stage))
+  names = [STAGES.join(os.path.basename(os.path.normpath(stage))
                     for stage in stages(run)) for run in runs]
   for ax, column in zip(axes, columns):
     curves = [_curve(rows, column) for rows in all_rows]
