@@ -59,8 +59,8 @@ def _headless_renderer():
 
 _headless_renderer()
 
-__all__ = ["load", "check_options", "TASKS", "CoopEnvironment", "is_truncation",
-           "pettingzoo_env", "rllib_env", "agent_range"]
+__all__ = ["load", "check_options", "TASKS", "CoopEnvironment",
+           "is_truncation", "pettingzoo_env", "rllib_env", "agent_range"]
 
 
 def agent_range(task):
