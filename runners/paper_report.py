@@ -156,11 +156,22 @@ def figures(args: paper.PaperArgs, plan, directory: str
   Table 1, per task: each variant's models; Fig. 4a: transport by training
   population; Fig. 4b, c: IPPO against MAPPO on the corridor with 6 and 7
   Ants. Each line is the mean of a configuration's models in a band of +-
-  one standard error (`plot.plot_groups`).
+  one standard error (`plot.plot_groups`); a transport model's line begins
+  with its push stage.
   """
   from runners import plot  # pylint: disable=g-import-not-at-top (matplotlib)
-  done = lambda cells: [paper.results_directory(c, args) for c in cells  # pylint: disable=g-long-lambda
-                        if paper.is_done(c, args)]
+
+  def curve(cell):
+    """A model's run, after its stage's where it has one (transport's push
+    stage: one curve over the model's steps; the ravine's two stages train
+    side by side, so its joint run alone)."""
+    path = paper.results_directory(cell, args)
+    if len(cell.init_from) == 1:
+      stage = os.path.join(args.results, cell.init_from[0][1])
+      if os.path.exists(os.path.join(stage, 'metrics.csv')):
+        return plot.STAGES.join([stage, path])
+    return path
+  done = lambda cells: [curve(c) for c in cells if paper.is_done(c, args)]
   specs = []
   for task, n in paper_plan.TABLE1_TASKS:
     specs.append((f'table1_{task}.png', f'Table 1, {task} with {n} '
@@ -275,7 +286,10 @@ def report(args: paper.PaperArgs, plan=None) -> str:
               'Training success and return (windows of 100 episodes in each '
               "model's metrics.csv) against environment steps: the mean of "
               "a configuration's models in a band of +- one standard error; "
-              'the legend gives how many models. Fig. 5: every evaluation '
+              'the legend gives how many models. A transport model\'s line '
+              'begins with its push stage, whose return leaves out the '
+              'agent-target term (hence its step when the joint run '
+              'starts). Fig. 5: every evaluation '
               'episode of the final checkpoints at its start layout, filled '
               'for a success.', '']
     for caption, path in drawn:

@@ -269,7 +269,8 @@ def test_the_plan_skips_done_cells_and_resumes_a_partial_one(
   paper.run_plan(dataclasses.replace(args, actors=2), plan, log=pytest.fail)
 
 
-def test_report_rebuilds_the_tables_from_committed_results(tmp_path, capsys):
+def test_report_rebuilds_the_tables_from_committed_results(tmp_path, capsys,
+                                                          monkeypatch):
   args = _args(tmp_path, episodes=4)
   hrl = [c for c in paper_plan.PLAN if (c.experiment, c.task, c.agent) ==
          ('table1', 'transport', 'hrl') and not c.stage]
@@ -322,6 +323,15 @@ def test_report_rebuilds_the_tables_from_committed_results(tmp_path, capsys):
   assert sorted(data['coop_suite']['transport_n4']['hrl']) == ['seed_0',
                                                                'seed_1']
   assert 'Wrote the tables' in capsys.readouterr().out
+  # A transport model's curve begins with its committed push stage.
+  from runners import plot  # pylint: disable=g-import-not-at-top
+  drawn = {}
+  monkeypatch.setattr(plot, 'plot_groups', lambda groups, columns, out,
+                      title: drawn.setdefault(os.path.basename(out), groups))
+  paper_report.figures(args, paper_plan.PLAN, str(images))
+  results = [paper.results_directory(c, args) for c in hrl[:2]]
+  assert drawn['table1_transport.png']['HRL'] == [
+      f'{os.path.join(args.results, push)}+{results[0]}', results[1]]
 
 
 def test_eval_json_follows_marl_eval_layout(tiny_run, tmp_path, capsys):
