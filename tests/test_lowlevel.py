@@ -438,20 +438,48 @@ def test_shipped_velocity_controller_tracks_commands():
   assert results['stand_drift'][0] <= 0.3 and results['stand_fall'][0] == 0
 
 
+def _batch_and_copies_alone(**train_args):
+  """An `EnvBatch` of two copies (environment seeds 3 and 4) of a run with
+  `train_args`, and the same two copies built alone, all reset."""
+  from runners import config as config_lib  # pylint: disable=g-import-not-at-top
+  from runners import learner_loop  # pylint: disable=g-import-not-at-top
+  from runners import rollout  # pylint: disable=g-import-not-at-top
+  args = config_lib.train_args(task='transport', n_agents=2, **train_args)
+  spec = learner_loop.environment_spec(args)
+  alone = [spec.make(seed) for seed in (3, 4)]
+  for env in alone:
+    env.reset()
+  return rollout.EnvBatch(spec, args.hierarchy, [3, 4]), alone
+
+
+def _step_alone_and_compare(batch, alone, actions, steps):
+  """Steps each copy alone with its two rows of `actions` and asserts the
+  batch's `steps` hold the same rewards, discounts and next observations
+  (the reset's where the episode ended); returns the episode metrics of
+  the copies whose episode ended ({copy: metrics})."""
+  ended = {}
+  for e, env in enumerate(alone):
+    timestep = env.step(actions[2 * e:2 * e + 2])
+    if timestep.last():
+      ended[e] = env.episode_metrics()
+    np.testing.assert_array_equal(steps['ant'].reward[2 * e:2 * e + 2],
+                                  timestep.reward)
+    np.testing.assert_array_equal(steps['ant'].discount[2 * e],
+                                  timestep.discount)
+    observation = env.reset().observation if timestep.last() else (
+        timestep.observation)
+    for got, want in zip(batch._observations[e], observation):  # pylint: disable=protected-access
+      for key in want:
+        np.testing.assert_array_equal(got[key], want[key], err_msg=key)
+  return ended
+
+
 def test_copies_in_lockstep_step_exactly_as_each_copy_alone():
   """`EnvBatch` runs its copies' command periods in lockstep with one
   lower-layer call per low-level step; every observation, reward and
   discount equals stepping each copy alone with `CommandWrapper.step`,
   through an episode that ends mid-period and the reset after it."""
-  from runners import config as config_lib  # pylint: disable=g-import-not-at-top
-  from runners import learner_loop  # pylint: disable=g-import-not-at-top
-  from runners import rollout  # pylint: disable=g-import-not-at-top
-  args = config_lib.TrainArgs(task='transport', n_agents=2, time_limit=1.2)
-  spec = learner_loop.environment_spec(args)
-  batch = rollout.EnvBatch(spec, args.hierarchy, [3, 4])
-  alone = [spec.make(seed) for seed in (3, 4)]
-  for env in alone:
-    env.reset()
+  batch, alone = _batch_and_copies_alone(time_limit=1.2)
   calls = []
   act = batch.envs[0].controller.act
   batch._controller = mock.Mock(act=lambda x: calls.append(x.shape) or act(x))  # pylint: disable=protected-access
@@ -461,17 +489,7 @@ def test_copies_in_lockstep_step_exactly_as_each_copy_alone():
     commands = rng.uniform(-3, 3, (4, 2))
     steps, episodes, _ = batch.step({'ant': commands})
     ended += len(episodes)
-    for e, env in enumerate(alone):
-      timestep = env.step(commands[2 * e:2 * e + 2])
-      np.testing.assert_array_equal(steps['ant'].reward[2 * e:2 * e + 2],
-                                    timestep.reward)
-      np.testing.assert_array_equal(steps['ant'].discount[2 * e],
-                                    timestep.discount)
-      if timestep.last():
-        timestep = env.reset()
-      for got, want in zip(batch._observations[e], timestep.observation):  # pylint: disable=protected-access
-        for key in want:
-          np.testing.assert_array_equal(got[key], want[key], err_msg=key)
+    _step_alone_and_compare(batch, alone, commands, steps)
   assert ended == 2
   assert calls[:10] == [(4, batch.envs[0].controller.observation_size)] * 10
   assert len(calls) == 10 + 10 + 4 + 10
@@ -482,34 +500,16 @@ def test_flat_copies_stepped_in_phases_step_as_each_copy_alone():
   `EnvBatch` in the two phases of a step; rewards (locomotion terms
   included), discounts, observations and episode metrics equal each copy
   stepped alone, through the time limit and the reset after it."""
-  from runners import config as config_lib  # pylint: disable=g-import-not-at-top
-  from runners import learner_loop  # pylint: disable=g-import-not-at-top
-  from runners import rollout  # pylint: disable=g-import-not-at-top
-  args = config_lib.train_args(task='transport', n_agents=2, agent='flat',
-                               time_limit=0.3)
-  spec = learner_loop.environment_spec(args)
-  batch = rollout.EnvBatch(spec, args.hierarchy, [3, 4])
-  alone = [spec.make(seed) for seed in (3, 4)]
-  for env in alone:
-    env.reset()
+  batch, alone = _batch_and_copies_alone(agent='flat', time_limit=0.3)
   rng = np.random.default_rng(0)
   ended = []
   for _ in range(8):  # 0.3 s episodes of 50 ms steps: 6 steps each.
     actions = rng.uniform(-1, 1, (4, 8))
     steps, episodes, _ = batch.step({'ant': actions})
     ended += episodes
-    for e, env in enumerate(alone):
-      timestep = env.step(actions[2 * e:2 * e + 2])
-      np.testing.assert_array_equal(steps['ant'].reward[2 * e:2 * e + 2],
-                                    timestep.reward)
-      np.testing.assert_array_equal(steps['ant'].discount[2 * e],
-                                    timestep.discount)
-      if timestep.last():
-        metrics = next(m for m in ended if m['env'] == e)
-        assert metrics['reward/alive'] != 0.0  # The locomotion terms.
-        assert {**env.episode_metrics(), 'env': e} == metrics
-        timestep = env.reset()
-      for got, want in zip(batch._observations[e], timestep.observation):  # pylint: disable=protected-access
-        for key in want:
-          np.testing.assert_array_equal(got[key], want[key], err_msg=key)
+    alone_ended = _step_alone_and_compare(batch, alone, actions, steps)
+    assert sorted(alone_ended) == [m['env'] for m in episodes]
+    for m in episodes:
+      assert m['reward/alive'] != 0.0  # The locomotion terms are in.
+      assert m == {**alone_ended[m['env']], 'env': m['env']}
   assert len(ended) == 2
