@@ -106,6 +106,14 @@ def results_directory(cell: paper_plan.Cell, args: PaperArgs) -> str:
   return os.path.join(args.results, cell.name)
 
 
+def stage_directories(cell: paper_plan.Cell, args: PaperArgs
+                      ) -> list[tuple[str, str]]:
+  """(species, results folder of the stage cell it starts from) of each
+  species the cell's run starts from (`Cell.init_from`)."""
+  return [(species, os.path.join(args.results, name))
+          for species, name in cell.init_from]
+
+
 def partial_directory(cell: paper_plan.Cell, args: PaperArgs) -> str:
   return os.path.join(args.partial, cell.name)
 
@@ -122,9 +130,8 @@ def train_args(cell: paper_plan.Cell, args: PaperArgs, resume: bool = False):
   if cell.stage:
     values['stage'] = cell.stage
   if cell.init_from:
-    values['init_from'] = tuple(
-        f'{species}={os.path.join(args.results, name)}'
-        for species, name in cell.init_from)
+    values['init_from'] = tuple(f'{species}={folder}' for species, folder
+                                in stage_directories(cell, args))
   return config_lib.train_args(**values)
 
 
@@ -368,8 +375,9 @@ def run_cell(cell: paper_plan.Cell, args: PaperArgs,
     log(f'{cell.path}: continues from {partial_directory(cell, args)}')
   if state.state in ('todo', 'partial'):
     if state.state == 'todo':
-      missing = [name for _, name in cell.init_from if not os.path.exists(
-          os.path.join(args.results, name, 'metrics.csv'))]
+      missing = [os.path.basename(folder)
+                 for _, folder in stage_directories(cell, args)
+                 if not os.path.exists(os.path.join(folder, 'metrics.csv'))]
       if missing:
         raise ValueError(f'{cell.name} starts from {missing}, which are not '
                          f'in {args.results} yet: run them first (--only).')

@@ -33,8 +33,13 @@ BEGIN, END = '<!-- paper:begin -->', '<!-- paper:end -->'
 def read_evaluation(cell: paper_plan.Cell, n_agents: int,
                     args: paper.PaperArgs) -> Optional[dict[str, Any]]:
   """The eval JSON of `cell` at population `n_agents`, or None."""
-  path = os.path.join(paper.results_directory(cell, args),
-                      paper.EVAL_FILE.format(n_agents))
+  return _evaluation_in(paper.results_directory(cell, args), n_agents)
+
+
+def _evaluation_in(folder: str, n_agents: int) -> Optional[dict[str, Any]]:
+  """The eval JSON at population `n_agents` in a cell's results `folder`,
+  or None."""
+  path = os.path.join(folder, paper.EVAL_FILE.format(n_agents))
   if not os.path.exists(path):
     return None
   with open(path) as f:
@@ -81,14 +86,9 @@ def _model_steps(cell, evaluation, args) -> tuple[int, ...]:
   """A model's environment steps: its run's, then those of the stage cells
   it started from (the curriculum; -1 where a stage has no evaluation)."""
   steps = [evaluation['env_steps']]
-  for _, stage in cell.init_from:
-    path = os.path.join(args.results, stage,
-                        paper.EVAL_FILE.format(cell.n_agents))
-    if os.path.exists(path):
-      with open(path) as f:
-        steps.append(json.load(f)['env_steps'])
-    else:
-      steps.append(-1)
+  for _, folder in paper.stage_directories(cell, args):
+    stage = _evaluation_in(folder, cell.n_agents)
+    steps.append(-1 if stage is None else stage['env_steps'])
   return tuple(steps)
 
 
@@ -166,10 +166,10 @@ def figures(args: paper.PaperArgs, plan, directory: str
     stage: one curve over the model's steps; the ravine's two stages train
     side by side, so its joint run alone)."""
     path = paper.results_directory(cell, args)
-    if len(cell.init_from) == 1:
-      stage = os.path.join(args.results, cell.init_from[0][1])
-      if os.path.exists(os.path.join(stage, 'metrics.csv')):
-        return plot.STAGES.join([stage, path])
+    stages = paper.stage_directories(cell, args)
+    if len(stages) == 1 and os.path.exists(
+        os.path.join(stages[0][1], 'metrics.csv')):
+      return plot.STAGES.join([stages[0][1], path])
     return path
   done = lambda cells: [curve(c) for c in cells if paper.is_done(c, args)]
   specs = []
