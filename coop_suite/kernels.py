@@ -270,6 +270,30 @@ def shared_exteroception(frames, k, geom_xpos, geom_xmat, geom_size,
 
 
 @numba.njit(cache=True)
+def command_input(frames, proprioception, world, velocity, source, columns,
+                  command_columns, out):
+  """The lower layer's input rows, written into `out` [n, d] in one call.
+
+  Row i gets agent i's `proprioception[i, source]` in `out[i, columns]` and
+  its command in `out[i, command_columns]` (2 columns): the world-frame
+  command `world[i]` seen in the agent's heading frame (`frames`, [n, >= 5]
+  x, y, z, cos, sin), as an offset from the agent to that point (position
+  paradigm) or as it is (`velocity`), through `to_heading`. The same
+  operations as `heading_offsets` and numpy's `rotate.py_func(cos, -sin,
+  ...)`, so the same numbers (cast to `out`'s dtype as numpy assigns).
+  """
+  for i in range(out.shape[0]):
+    dx, dy = world[i, 0], world[i, 1]
+    if not velocity:
+      dx, dy = dx - frames[i, 0], dy - frames[i, 1]
+    x, y = to_heading(frames[i, 3], frames[i, 4], dx, dy)
+    out[i, command_columns[0]] = x
+    out[i, command_columns[1]] = y
+    for k in range(source.shape[0]):
+      out[i, columns[k]] = proprioception[i, source[k]]
+
+
+@numba.njit(cache=True)
 def heading_offsets(frames, world_xy):
   """Offsets from each agent to world points, in its heading frame.
 

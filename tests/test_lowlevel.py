@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 import coop_suite
+from coop_suite.tasks import exteroception
 from agents import lowlevel
 from agents import observations as obs_lib
 from agents.lowlevel import controller as controller_lib
@@ -358,16 +359,51 @@ def test_command_wrapper_feeds_heading_frame_commands(controller):
   assert fed[0]['proprio/joints_pos'].shape == (2, 8)
 
 
-def test_command_wrapper_velocity_paradigm(controller, tmp_path):
-  # The tiny position network relabelled as a velocity controller.
+def _as_velocity(controller, directory):
+  """The tiny position network relabelled as a velocity controller, written
+  to `directory`; (its files, the loaded controller)."""
   config = dict(controller.config)
   config['paradigm'] = 'velocity'
   config['observation_keys'] = [k.replace('command/target', 'command/velocity')
                                 for k in controller.observation_keys]
   files = controller_lib.files(controller.params, controller.normalizer,
                                config)
-  run_dir.write_directory(str(tmp_path), files)
-  velocity = lowlevel.load('velocity', str(tmp_path))
+  run_dir.write_directory(directory, files)
+  return files, lowlevel.load('velocity', directory)
+
+
+@pytest.mark.parametrize('paradigm', ['position', 'velocity'])
+def test_controller_input_equals_the_per_key_formula(controller, paradigm,
+                                                     tmp_path):
+  # The compiled input writer against the numpy route it replaced, from the
+  # per-key features: bit for bit, on the rows of a larger array too.
+  if paradigm == 'velocity':
+    controller = _as_velocity(controller, str(tmp_path))[1]
+  env = lowlevel.CommandWrapper(coop_suite.load('transport', 3, seed=2),
+                                controller, command_period=0.25)
+  env.reset()
+  rng = np.random.default_rng(0)
+  for _ in range(3):
+    env.step(rng.uniform(-3, 3, (3, 2)))
+    frames = env._frames()  # pylint: disable=protected-access
+    if paradigm == 'position':
+      command = frames.to_heading_frame(env.world_commands)
+    else:
+      command = exteroception.rotate_to_heading(env.world_commands,
+                                                frames.cos, frames.sin)
+    features = env.task.features(env.physics, ('proprio',))
+    expected = np.concatenate(
+        [command if key == controller.command_key else features[key]
+         for key in controller.observation_keys], axis=1).astype(np.float32)
+    np.testing.assert_array_equal(env.controller_input(), expected)
+    rows = np.full((7, controller.observation_size), np.nan, np.float32)
+    env.controller_input(out=rows[2:5])
+    np.testing.assert_array_equal(rows[2:5], expected)
+    assert np.isnan(rows[:2]).all() and np.isnan(rows[5:]).all()
+
+
+def test_command_wrapper_velocity_paradigm(controller, tmp_path):
+  files, velocity = _as_velocity(controller, str(tmp_path))
   # The bytes a run carries load as the directory does (no directory).
   assert controller_lib.read_files(str(tmp_path)) == files
   from_bytes = controller_lib.from_files(files)

@@ -363,3 +363,15 @@ def test_time_limit_is_a_truncation(time_limit, steps):
   assert count == steps
   assert float(timestep.discount) == 1.0
   assert coop_suite.is_truncation(timestep)
+
+
+def test_each_agent_shares_one_read_only_zero():
+  # Bonus terms are zero on most steps: one shared array, which no caller
+  # can change by accident; other values are new arrays.
+  task = coop_suite.load("transport", 3, seed=0).task
+  zero = task.each_agent(0.0)
+  assert zero is task.each_agent(0) and not zero.flags.writeable
+  np.testing.assert_array_equal(zero, np.zeros(3))
+  bonus = task.each_agent(50)
+  assert bonus.flags.writeable and bonus is not task.each_agent(50)
+  np.testing.assert_array_equal(bonus, np.full(3, 50.0))

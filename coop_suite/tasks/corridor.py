@@ -88,8 +88,8 @@ class Corridor(base.CoopTask):
 
   def _reward_terms(self, physics):
     return {
-        "crossing": np.full(self.n_agents,
-                            self._config.crossing_bonus * self._new_crossings),
+        "crossing": self.each_agent(
+            self._config.crossing_bonus * self._new_crossings),
         "agent_target": self._measure(physics).agent_target,
     }
 

@@ -197,8 +197,7 @@ class Ravine(base.CoopTask):
       terms["destination"] = shaping[1]
       terms["fall"] = self._fall_term
     if self.stage == "joint":
-      terms["success"] = np.full(
-          self.n_agents,
+      terms["success"] = self.each_agent(
           self._config.success_bonus if self._success_event else 0.0)
     return terms
 

@@ -149,7 +149,7 @@ class Transport(base.CoopTask):
         "cylinder_target": shaping[0],
         "agent_cylinder": shaping[1],
         "agent_target": shaping[2],
-        "success": np.full(self.n_agents, bonus),
+        "success": self.each_agent(bonus),
     }
 
   def _progress(self, physics):
