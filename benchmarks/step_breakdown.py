@@ -1,6 +1,7 @@
 """Where one control step's time goes, as fractions of the whole step.
 
     python benchmarks/step_breakdown.py [--task transport] [--n-agents 4]
+    python benchmarks/step_breakdown.py --lockstep [--copies 16]
 
 Runs the real `env.step` with a timer around each piece it calls (action
 validation, the task's `before_step`, the physics substeps, the status
@@ -8,6 +9,13 @@ update, the reward, the observation) and prints each piece's share of the
 step, so that the figures do not depend on how busy the shared machine is.
 The pieces are timed where they run, with the caches as the physics leaves
 them; timed alone and warm they would look two to three times cheaper.
+
+`--lockstep` does the same for what an actor runs in training: `--copies`
+copies stepped in lockstep by `EnvBatch` with the shipped lower layer and
+random commands (the lower layer's input and call, each copy's physics
+phase and outcome phase, `docs/performance.md`). Run it pinned to one core
+with the actors' settings, e.g. `JAX_PLATFORMS=cpu OMP_NUM_THREADS=1
+XLA_FLAGS=--xla_cpu_multi_thread_eigen=false taskset -c 1 python ...`.
 """
 
 import argparse
@@ -37,8 +45,15 @@ def main():
   parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
   parser.add_argument("--task", default="transport")
   parser.add_argument("--n-agents", type=int, default=4)
-  parser.add_argument("--steps", type=int, default=3000)
+  parser.add_argument("--steps", type=int, default=3000,
+                      help="control steps (of each copy with --lockstep)")
+  parser.add_argument("--lockstep", action="store_true",
+                      help="copies in lockstep with the lower layer")
+  parser.add_argument("--copies", type=int, default=16)
   args = parser.parse_args()
+  if args.lockstep:
+    lockstep(args)
+    return
   env = coop_suite.load(args.task, args.n_agents, seed=0, time_limit=1e9)
   env.reset()
   task = env.task
@@ -71,6 +86,58 @@ def main():
     print(f"  {name:24s} {seconds / total:5.2f}")
   rest = 1 - sum(totals.values()) / total
   print(f"  {'rest (composer, timers)':24s} {rest:5.2f}")
+
+
+def lockstep(args):
+  """The breakdown of `EnvBatch`'s lockstep steps (see the module doc)."""
+  # pylint: disable=g-import-not-at-top
+  from coop_suite.fast import stepping
+  from runners import config as config_lib
+  from runners import learner_loop
+  from runners import rollout
+  # pylint: enable=g-import-not-at-top
+  train_args = config_lib.TrainArgs(
+      task=args.task, n_agents=args.n_agents, envs_per_actor=args.copies,
+      logdir="", progress=False, total_steps=1, time_limit=1e9)
+  batch = rollout.EnvBatch(learner_loop.environment_spec(train_args),
+                           train_args.hierarchy, range(args.copies),
+                           global_state=False)
+  (species,) = batch.species  # Every agent commanded alike.
+  totals = collections.defaultdict(float)
+  # The substeps and the (frozen) controller by class, the rest per copy.
+  stepping.SubstepRunner.step = _timed(stepping.SubstepRunner.step, totals,
+                                       "physics substeps")
+  controller = type(batch.envs[0].controller)
+  controller.act = _timed(controller.act, totals, "lower-layer call")
+  for copy in batch.envs:
+    copy.controller_input = _timed(copy.controller_input, totals,
+                                   "lower-layer input")
+    copy.env.step_physics = _timed(copy.env.step_physics, totals,
+                                   "physics phase")
+    copy.env.step_outcome = _timed(copy.env.step_outcome, totals,
+                                   "outcome phase")
+  low_level = batch.envs[0].low_level_steps
+  commands = np.random.RandomState(0).uniform(
+      -3, 3, (max(1, args.steps // low_level), args.copies * args.n_agents,
+              2))
+  for command in commands[:3]:  # Warm-up: compile, fill the caches.
+    batch.step({species.name: command})
+  totals.clear()
+  start = time.perf_counter()
+  for command in commands:
+    batch.step({species.name: command})
+  total = time.perf_counter() - start
+  totals["physics phase"] -= totals["physics substeps"]
+  steps = len(commands) * low_level * args.copies
+  print(f"{args.task} with {args.n_agents} agents, {args.copies} copies in "
+        f"lockstep with the lower layer: one control step of one copy = "
+        f"1.00 ({total / steps * 1e6:.0f} us)")
+  for name in ("physics substeps", "physics phase", "lower-layer input",
+               "lower-layer call", "outcome phase"):
+    label = name + (" (the rest)" if name == "physics phase" else "")
+    print(f"  {label:30s} {totals[name] / total:5.2f}")
+  rest = 1 - sum(totals.values()) / total
+  print(f"  {'rest (commands, rows)':30s} {rest:5.2f}")
 
 
 if __name__ == "__main__":

@@ -18,10 +18,6 @@ median over the blocks of raw time / measured time. Prints:
                                    (each copy's `CommandWrapper.step`)
   pipeline with N actors / (N x raw), N = 1, 2     (target >= 0.60 at 2)
   the learner's share of an update with the most actors
-  where a lockstep step goes: shares of one timed block by part (MuJoCo,
-                                   the physics phase's Python, the lower
-                                   layer's input and call, the outcome
-                                   phase, the rest)
 
 `--actors 1 2 4 8 14` measures the pipeline for those actor counts instead
 (the scaling curve, on a machine with that many cores; the one-core raw
@@ -157,62 +153,8 @@ def one_core(args):
   for name, block in (('lockstep', lockstep), ('copy_by_copy', copy_by_copy)):
     block()  # Warm-up (the controller's compilation).
     out[name], _ = _ratio(block, recorders, substeps, args.blocks)
-  out['lockstep_parts'] = _parts(batch, lockstep)
   batch.close()
   return out
-
-
-PARTS = (('mujoco', 'MuJoCo (the substeps)'),
-         ('physics_python', 'the physics phase\'s Python'),
-         ('input', 'lower-layer input'),
-         ('controller', 'lower-layer call'),
-         ('outcome', 'outcome phase (status, reward)'),
-         ('rest', 'the rest (commands, rows)'))
-"""The parts of a lockstep step `_parts` times, with their printed names."""
-
-
-def _parts(batch, block):
-  """Shares of `block`'s time (lockstep commands of `batch`) by part (see
-  `PARTS`), timed around the methods `EnvBatch` calls: where a step's time
-  goes, as fractions of one run (robust to the machine's drift)."""
-  from coop_suite.fast import stepping  # pylint: disable=g-import-not-at-top
-  spent = dict.fromkeys(('mujoco', 'controller', 'input', 'physics',
-                         'outcome'), 0.0)
-  undo = []
-
-  def time_calls(owner, name, part):
-    own = vars(owner).get(name)  # A class's function or an object's own.
-    inner = getattr(owner, name)
-
-    def timed(*args, **kwargs):
-      begin = time.perf_counter()
-      try:
-        return inner(*args, **kwargs)
-      finally:
-        spent[part] += time.perf_counter() - begin
-    setattr(owner, name, timed)
-    undo.append((owner, name, own))
-  # The substeps and the (frozen) controller at class level, the rest per
-  # object.
-  time_calls(stepping.SubstepRunner, 'step', 'mujoco')
-  time_calls(type(batch.envs[0].controller), 'act', 'controller')
-  for copy in batch.envs:
-    time_calls(copy, 'controller_input', 'input')
-    time_calls(copy.env, 'step_physics', 'physics')
-    time_calls(copy.env, 'step_outcome', 'outcome')
-  try:
-    begin = time.perf_counter()
-    block()
-    total = time.perf_counter() - begin
-  finally:
-    for owner, name, own in reversed(undo):
-      if own is None:
-        delattr(owner, name)  # The class's method again.
-      else:
-        setattr(owner, name, own)
-  spent['physics_python'] = spent.pop('physics') - spent['mujoco']
-  spent['rest'] = total - sum(spent.values())
-  return {name: spent[name] / total for name, _ in PARTS}
 
 
 def pipeline(args, actors, logdir):
@@ -295,9 +237,6 @@ def main(argv=None):
                 pipelines[most][1], ''))
   for name, value, target in lines:
     print(f'{name:42s} {value:5.2f}  {target}')
-  print('where a lockstep step goes: ' + ', '.join(
-      f'{label} {single["lockstep_parts"][name]:.2f}'
-      for name, label in PARTS))
 
 
 if __name__ == '__main__':
