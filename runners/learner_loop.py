@@ -230,12 +230,14 @@ def _train(args, checkpoint, on_update):
   row = {}
 
   def save(score=None):
-    return checkpoints.save(
-        args.logdir, learners,
-        {**counters, **state, 'window': window.state(),
-         'best_score': best_score}, args.keep_checkpoints, score)
+    return writer.save(learners, {**counters, **state,
+                                  'window': window.state(),
+                                  'best_score': best_score}, score)
 
   pool = None
+  # Each checkpoint is written while the next update is collected; `close`
+  # waits for the last (checkpoints.Writer).
+  writer = checkpoints.Writer(args.logdir, args.keep_checkpoints)
   try:
     pool = _make_pool(args, spec, config, counters['update'])
     with run_dir.GracefulStop() as stop:
@@ -292,8 +294,11 @@ def _train(args, checkpoint, on_update):
   finally:
     progress.close()
     log.close()
-    if pool is not None:
-      pool.close()
+    try:
+      if pool is not None:
+        pool.close()
+    finally:
+      writer.close()
   return {**row, 'updates': updates, 'stopped_by': stop.signal,
           'checkpoint': (checkpoints.list_checkpoints(args.logdir) or [''])[-1]}
 

@@ -244,6 +244,36 @@ def test_a_checkpoint_killed_while_written_is_never_read(tmp_path):
   assert checkpoints.saved_learner(second, 'ant')['state']['w'][0] == 2.0
 
 
+def test_a_run_writer_saves_in_the_background_what_one_shot_saves_keep(
+    tmp_path):
+  # A run's writer: each save finishes while the run goes on; the same
+  # checkpoints kept as one-shot saves keep, each whole once the writer is
+  # closed, with the values of its update (not what the learner holds
+  # later).
+  scores = {2: (0.5, 1.0), 3: (0.5, 2.0), 4: (0.4, 9.0)}  # 3 is the best.
+  one_shot = str(tmp_path / 'one_shot')
+  expected = [_save(one_shot, i, keep=2, score=scores.get(i))
+              for i in range(1, 7)]
+  logdir = str(tmp_path / 'run')
+  learner = FakeLearner(0.0)
+  paths = []
+  with checkpoints.Writer(logdir, keep=2) as writer:
+    for i in range(1, 7):
+      learner.value = float(i)
+      paths.append(writer.save({'ant': learner}, _state(i), scores.get(i)))
+      learner.value = -1.0  # The next update changes the learner.
+  assert paths == [p.replace(one_shot, logdir) for p in expected]
+  kept = checkpoints.list_checkpoints(logdir)
+  assert kept == [p.replace(one_shot, logdir)
+                  for p in checkpoints.list_checkpoints(one_shot)]
+  assert kept == [paths[2], paths[4], paths[5]]
+  for path in kept:
+    update = checkpoints.check_complete(path)['update']
+    assert checkpoints.saved_learner(path, 'ant')['state']['w'][0] == update
+  assert checkpoints.resolve(os.path.join(logdir, 'checkpoints',
+                                          checkpoints.BEST)) == paths[2]
+
+
 def test_the_newest_and_the_best_are_kept(tmp_path):
   logdir = str(tmp_path)
   assert checkpoints.list_checkpoints(logdir) == []
