@@ -28,8 +28,9 @@ machine, during which the driver only waits for its actors); the next save
 and the writer's `close` wait for it, so a run that stops, fails or is
 interrupted ends with its last checkpoint whole. Only a kill of the process
 in that fraction of a second costs the update before the current one too.
-`save` writes one checkpoint and returns when it is complete. It keeps the newest `keep` and, with `--keep-best`, the best
-one by its window's (success, return). `--resume` and `coop-eval` read the
+`save` writes one checkpoint and returns when it is complete. The writer
+keeps the newest `keep` and, with `--keep-best`, the best one by its
+window's (success, return). `--resume` and `coop-eval` read the
 newest checkpoint that reads completely (`resolve`): one damaged by
 something else (a full disk, a copy cut short) is named and passed over for
 the one before it. `coop-eval --checkpoint <logdir>/checkpoints/best` reads
@@ -189,7 +190,7 @@ def write_policy(checkpoint: str, logdir: str) -> str:
            for name in read['state']['learners']}
   with _manager(_directory(logdir), keep=1) as manager:
     _write(manager, saved, {**read['state'], 'policy_only': True})
-  return os.path.join(_directory(logdir), str(read['state']['update']))
+  return os.path.join(_directory(logdir), str(int(read['state']['update'])))
 
 
 def policy_writable(checkpoint: str) -> bool:
