@@ -71,6 +71,11 @@ def _directory(logdir: str) -> str:
   return os.path.join(logdir, 'checkpoints')
 
 
+def _step_path(logdir: str, update) -> str:
+  """The directory of the orbax step (checkpoint) of `update`."""
+  return os.path.join(_directory(logdir), str(int(update)))
+
+
 def _score(metrics: Mapping[str, float]) -> tuple[float, float]:
   return metrics['success'], metrics['return']
 
@@ -140,7 +145,7 @@ class Writer:
     saved = {name: learner.save() for name, learner in learners.items()}
     _write(self._manager, saved, state, score)
     self._new_best = score is not None
-    return os.path.join(_directory(self._logdir), str(int(state['update'])))
+    return _step_path(self._logdir, state['update'])
 
   def _finish(self) -> None:
     """Waits for the save in flight, then removes what it replaces."""
@@ -190,7 +195,7 @@ def write_policy(checkpoint: str, logdir: str) -> str:
            for name in read['state']['learners']}
   with _manager(_directory(logdir), keep=1) as manager:
     _write(manager, saved, {**read['state'], 'policy_only': True})
-  return os.path.join(_directory(logdir), str(int(read['state']['update'])))
+  return _step_path(logdir, read['state']['update'])
 
 
 def policy_writable(checkpoint: str) -> bool:
@@ -244,7 +249,7 @@ def list_checkpoints(logdir: str) -> list[str]:
   found = _legacy_checkpoints(logdir)
   if os.path.isdir(_directory(logdir)):
     with _manager(_directory(logdir)) as manager:
-      found += [os.path.join(_directory(logdir), str(step))
+      found += [_step_path(logdir, step)
                 for step in manager.all_steps()]
   return sorted(found, key=lambda path: (_update(path), _is_step(path)))
 
