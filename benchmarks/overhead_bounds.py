@@ -1,6 +1,7 @@
 """How close to raw `mj_step` the environment could get, part by part.
 
     python benchmarks/overhead_bounds.py [--task transport] [--n-agents 4]
+    python benchmarks/overhead_bounds.py --lockstep [--copies 16]
 
 Prints the env-step / raw-`mj_step` ratio of `env_throughput.py` four times
 on one task: the full step; without building the observation
@@ -9,11 +10,23 @@ replaced by no-ops (an upper bound for making them free, e.g. compiled);
 and with both. The gaps between the rows are what each part costs in the
 real loop, where the caches are cold after the physics; the third row bounds
 what compiling the task logic could reach.
+
+`--lockstep` bounds the same part in what an actor runs in training
+(`EnvBatch`: `--copies` copies in lockstep with the shipped lower layer and
+random commands): two batches, one with the task's status update and reward
+as no-ops, stepped in short alternating blocks (the order swapped each
+round, so that the shared machine's drift hits both alike); prints the
+median and quartiles of the per-round time ratio (no-ops / full step). Run
+it pinned to one core with the actors' settings, e.g. `JAX_PLATFORMS=cpu
+OMP_NUM_THREADS=1 XLA_FLAGS=--xla_cpu_multi_thread_eigen=false taskset -c 1
+python ...`.
 """
 
 import argparse
+import time
 
 from env_throughput import measure  # pylint: disable=g-bad-import-order
+import numpy as np  # pylint: disable=g-bad-import-order
 
 
 def _without_task_logic(env):
@@ -29,7 +42,13 @@ def main():
   parser.add_argument("--n-agents", type=int, default=4)
   parser.add_argument("--steps", type=int, default=200)
   parser.add_argument("--rounds", type=int, default=20)
+  parser.add_argument("--lockstep", action="store_true",
+                      help="bound the task logic in EnvBatch's lockstep")
+  parser.add_argument("--copies", type=int, default=16)
   args = parser.parse_args()
+  if args.lockstep:
+    lockstep(args)
+    return
   print(f"{args.task} with {args.n_agents} agents: env step / raw mj_step")
   for name, observe, prepare in (
       ("full step", True, None),
@@ -39,6 +58,51 @@ def main():
     *_, ratio = measure(args.task, args.n_agents, args.steps, args.rounds,
                         observe=observe, prepare=prepare)
     print(f"  {name:30s} {ratio:5.2f}", flush=True)
+
+
+
+def lockstep(args):
+  """The task logic's share of `EnvBatch`'s lockstep step (module doc)."""
+  # pylint: disable=g-import-not-at-top
+  from runners import config as config_lib
+  from runners import learner_loop
+  from runners import rollout
+  # pylint: enable=g-import-not-at-top
+  train_args = config_lib.TrainArgs(
+      task=args.task, n_agents=args.n_agents, envs_per_actor=args.copies,
+      logdir="", progress=False, total_steps=1, time_limit=1e9)
+  spec = learner_loop.environment_spec(train_args)
+  full, bound = (rollout.EnvBatch(spec, train_args.hierarchy,
+                                  range(args.copies), global_state=False)
+                 for _ in range(2))
+  for copy in bound.envs:
+    _without_task_logic(copy.env)
+  (species,) = full.species  # Every agent commanded alike.
+  commands = np.random.RandomState(0).uniform(
+      -3, 3, (4, args.copies * args.n_agents, 2))
+
+  def seconds(batch):
+    start = time.perf_counter()
+    for command in commands:
+      batch.step({species.name: command})
+    return time.perf_counter() - start
+  seconds(full), seconds(bound)  # Warm-up: compile, fill the caches.
+  ratios, steps = [], []
+  for round_ in range(args.rounds * 2):
+    first, second = (full, bound) if round_ % 2 == 0 else (bound, full)
+    times = {id(first): seconds(first), id(second): seconds(second)}
+    ratios.append(times[id(bound)] / times[id(full)])
+    steps.append(times[id(full)])
+  per_step = (np.median(steps) / (len(commands) * full.envs[0].low_level_steps
+                                  * args.copies))
+  print(f"{args.task} with {args.n_agents} agents, {args.copies} copies in "
+        f"lockstep ({per_step * 1e6:.0f} us per copy and control step): "
+        "status and reward as no-ops / full step, per round: median "
+        f"{np.median(ratios):.3f}, quartiles "
+        f"{np.percentile(ratios, 25):.3f}-{np.percentile(ratios, 75):.3f} "
+        f"({len(ratios)} rounds)")
+  full.close()
+  bound.close()
 
 
 if __name__ == "__main__":
