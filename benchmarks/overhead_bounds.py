@@ -60,7 +60,6 @@ def main():
     print(f"  {name:30s} {ratio:5.2f}", flush=True)
 
 
-
 def lockstep(args):
   """The task logic's share of `EnvBatch`'s lockstep step (module doc)."""
   # pylint: disable=g-import-not-at-top
@@ -89,10 +88,14 @@ def lockstep(args):
   seconds(full), seconds(bound)  # Warm-up: compile, fill the caches.
   ratios, steps = [], []
   for round_ in range(args.rounds * 2):
-    first, second = (full, bound) if round_ % 2 == 0 else (bound, full)
-    times = {id(first): seconds(first), id(second): seconds(second)}
-    ratios.append(times[id(bound)] / times[id(full)])
-    steps.append(times[id(full)])
+    if round_ % 2 == 0:
+      full_seconds = seconds(full)
+      bound_seconds = seconds(bound)
+    else:  # The other order, so that a drift hits both alike.
+      bound_seconds = seconds(bound)
+      full_seconds = seconds(full)
+    ratios.append(bound_seconds / full_seconds)
+    steps.append(full_seconds)
   per_step = (np.median(steps) / (len(commands) * full.envs[0].low_level_steps
                                   * args.copies))
   print(f"{args.task} with {args.n_agents} agents, {args.copies} copies in "
