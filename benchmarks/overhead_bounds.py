@@ -27,6 +27,7 @@ import time
 
 from env_throughput import measure  # pylint: disable=g-bad-import-order
 import numpy as np  # pylint: disable=g-bad-import-order
+from step_breakdown import lockstep_batch  # pylint: disable=g-bad-import-order
 
 
 def _without_task_logic(env):
@@ -62,17 +63,7 @@ def main():
 
 def lockstep(args):
   """The task logic's share of `EnvBatch`'s lockstep step (module doc)."""
-  # pylint: disable=g-import-not-at-top
-  from runners import config as config_lib
-  from runners import learner_loop
-  from runners import rollout
-  # pylint: enable=g-import-not-at-top
-  train_args = config_lib.TrainArgs(
-      task=args.task, n_agents=args.n_agents, envs_per_actor=args.copies,
-      logdir="", progress=False, total_steps=1, time_limit=1e9)
-  spec = learner_loop.environment_spec(train_args)
-  full, bound = (rollout.EnvBatch(spec, train_args.hierarchy,
-                                  range(args.copies), global_state=False)
+  full, bound = (lockstep_batch(args.task, args.n_agents, args.copies)
                  for _ in range(2))
   for copy in bound.envs:
     _without_task_logic(copy.env)

@@ -88,20 +88,26 @@ def main():
   print(f"  {'rest (composer, timers)':24s} {rest:5.2f}")
 
 
-def lockstep(args):
-  """The breakdown of `EnvBatch`'s lockstep steps (see the module doc)."""
+def lockstep_batch(task, n_agents, copies):
+  """An actor's `EnvBatch` as training builds it: `copies` copies of `task`
+  with the shipped lower layer, episodes too long to end in a measurement."""
   # pylint: disable=g-import-not-at-top
-  from coop_suite.fast import stepping
   from runners import config as config_lib
   from runners import learner_loop
   from runners import rollout
   # pylint: enable=g-import-not-at-top
   train_args = config_lib.TrainArgs(
-      task=args.task, n_agents=args.n_agents, envs_per_actor=args.copies,
-      logdir="", progress=False, total_steps=1, time_limit=1e9)
-  batch = rollout.EnvBatch(learner_loop.environment_spec(train_args),
-                           train_args.hierarchy, range(args.copies),
-                           global_state=False)
+      task=task, n_agents=n_agents, envs_per_actor=copies, logdir="",
+      progress=False, total_steps=1, time_limit=1e9)
+  return rollout.EnvBatch(learner_loop.environment_spec(train_args),
+                          train_args.hierarchy, range(copies),
+                          global_state=False)
+
+
+def lockstep(args):
+  """The breakdown of `EnvBatch`'s lockstep steps (see the module doc)."""
+  from coop_suite.fast import stepping  # pylint: disable=g-import-not-at-top
+  batch = lockstep_batch(args.task, args.n_agents, args.copies)
   (species,) = batch.species  # Every agent commanded alike.
   totals = collections.defaultdict(float)
   # The substeps and the (frozen) controller by class, the rest per copy.
