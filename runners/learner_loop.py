@@ -111,11 +111,14 @@ def probe(spec: envs_lib.EnvSpec, config):
 
 
 def train(args: config_lib.TrainArgs,
-          on_update: Optional[Callable[..., None]] = None
-          ) -> dict[str, Any]:
-  """Runs (or resumes) a run; returns its last row plus 'checkpoint'.
+          on_update: Optional[Callable[..., None]] = None,
+          deadline: Optional[float] = None) -> dict[str, Any]:
+  """Runs (or resumes) a run; returns its last row plus 'checkpoint' and
+  'stopped_by' (None, a signal's name, or `run_dir.DEADLINE`).
 
-  `on_update(update, row, pool)` is called after every update.
+  `on_update(update, row, pool)` is called after every update. Past
+  `deadline` (`time.time()` seconds) the run stops after its update with a
+  checkpoint, as on SIGTERM.
   """
   # Options the task refuses (a stage it lacks, an agent count out of its
   # range) fail here, before the run directory exists.
@@ -132,7 +135,7 @@ def train(args: config_lib.TrainArgs,
       print(f'Writing to {os.path.abspath(args.logdir)}'
             + (f', resuming from {checkpoint}' if checkpoint else ''),
             flush=True)
-      return _train(args, checkpoint, on_update)
+      return _train(args, checkpoint, on_update, deadline)
     finally:
       if owns_ray:
         import ray  # pylint: disable=g-import-not-at-top
@@ -180,7 +183,7 @@ def initialize_from_runs(args: config_lib.TrainArgs,
     print(f'{species}: parameters and normalisers from {source}', flush=True)
 
 
-def _train(args, checkpoint, on_update):
+def _train(args, checkpoint, on_update, deadline):
   config = args.hierarchy
   spec = environment_spec(args)
   layout, keys, per_action, dt = probe(spec, config)
@@ -240,7 +243,7 @@ def _train(args, checkpoint, on_update):
   writer = checkpoints.Writer(args.logdir, args.keep_checkpoints)
   try:
     pool = _make_pool(args, spec, config, counters['update'])
-    with run_dir.GracefulStop() as stop:
+    with run_dir.GracefulStop(deadline) as stop:
       while counters['update'] < updates and not stop.requested:
         tick = time.perf_counter()
         variables = {name: dict(zip(rollout.VARIABLE_NAMES, jax.device_get(
@@ -287,6 +290,9 @@ def _train(args, checkpoint, on_update):
           saved_at = counters['update']
         if on_update is not None:
           on_update(counters['update'], row, pool)
+      if saved_at < counters['update']:  # A stop after the update's save test.
+        save()
+        saved_at = counters['update']
   except BaseException:
     if not learning and saved_at < counters['update']:
       save()  # The last complete update is not lost.
@@ -299,7 +305,7 @@ def _train(args, checkpoint, on_update):
         pool.close()
     finally:
       writer.close()
-  return {**row, 'updates': updates, 'stopped_by': stop.signal,
+  return {**row, 'updates': updates, 'stopped_by': stop.reason,
           'checkpoint': (checkpoints.list_checkpoints(args.logdir) or [''])[-1]}
 
 

@@ -19,21 +19,28 @@ never uses. Training and evaluation run in this process
 running cell after a checkpoint (exit status 128 + the signal's number); run
 the same command again to continue. `coop-paper --stash` copies unfinished
 runs into `--partial` (results/paper_partial) to be committed at the end of
-a session; the next session's `coop-paper` resumes from them. See
-docs/paper.md.
+a session; the next session's `coop-paper` resumes from them. `--hours H`
+does both by itself when H hours are up (a session's or a cluster job's
+time limit): the cell stops with a checkpoint, is stashed, and coop-paper
+exits with status 75 (`EXIT_OUT_OF_TIME`). See docs/paper.md.
 """
 import dataclasses
 import os
 import shutil
 import signal
 import sys
+import time
 from typing import Callable, Optional
 
 from agents import fields
 from runners import cli
 from runners import paper_plan
+from runners import run_dir
 
 EVAL_FILE = 'eval_n{}.json'
+EXIT_OUT_OF_TIME = 75
+"""`coop-paper`'s exit status when `--hours` ran out (sysexits' EX_TEMPFAIL:
+run it again)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -88,6 +95,13 @@ class PaperArgs:
   """Environment copies stepped together while evaluating."""
   progress: bool = True
   """Progress bar while training."""
+  hours: float = fields.field(0.0, fields.NON_NEGATIVE)
+  """Wall-clock hours for this command, 0 for no limit (a session's or a
+  cluster job's time, less a margin). When they are up, the cell being
+  trained stops after its update with a checkpoint and is stashed (as
+  --stash), and no other cell starts: commit --partial and run the same
+  command again to continue. A cell whose training ends in time is still
+  evaluated (minutes)."""
 
   def __post_init__(self):
     fields.check(self)
@@ -360,9 +374,11 @@ def unstash(cell: paper_plan.Cell, args: PaperArgs) -> bool:
 
 
 def run_cell(cell: paper_plan.Cell, args: PaperArgs,
-             log: Callable[[str], None] = print) -> Optional[str]:
+             log: Callable[[str], None] = print,
+             deadline: Optional[float] = None) -> Optional[str]:
   """Trains (or resumes) and evaluates one cell, then publishes it;
-  returns the name of the signal that stopped its training, else None."""
+  returns what stopped its training early (a signal's name, or
+  `run_dir.DEADLINE` once `time.time()` passes `deadline`), else None."""
   from runners import checkpoints  # pylint: disable=g-import-not-at-top
   from runners import learner_loop  # pylint: disable=g-import-not-at-top
   state = status(cell, args)
@@ -382,7 +398,8 @@ def run_cell(cell: paper_plan.Cell, args: PaperArgs,
         raise ValueError(f'{cell.name} starts from {missing}, which are not '
                          f'in {args.results} yet: run them first (--only).')
     summary = learner_loop.train(
-        train_args(cell, args, resume=state.state == 'partial'))
+        train_args(cell, args, resume=state.state == 'partial'),
+        deadline=deadline)
     if summary.get('stopped_by'):
       return summary['stopped_by']
   checkpoint = checkpoints.resolve(run_directory(cell, args))
@@ -398,8 +415,10 @@ def run_cell(cell: paper_plan.Cell, args: PaperArgs,
 
 def run_plan(args: PaperArgs, plan=None,
              log: Callable[[str], None] = print) -> Optional[str]:
-  """Runs every selected cell that is not done, in plan order; returns the
-  signal that stopped it early, else None."""
+  """Runs every selected cell that is not done, in plan order; returns what
+  stopped it early (`run_cell`), else None. Out of `--hours`, the cell it
+  stopped is stashed and no other starts."""
+  deadline = time.time() + args.hours * 3600 if args.hours else None
   default = PaperArgs()
   if args.budget and (args.results == default.results
                       or args.runs == default.runs
@@ -420,7 +439,14 @@ def run_plan(args: PaperArgs, plan=None,
       args.ray_address, num_cpus=max(os.cpu_count(), args.actors))
   try:
     for cell in cells:
-      stopped = run_cell(cell, args, log)
+      if deadline and time.time() >= deadline:
+        log(f'Out of time (--hours {args.hours:g}) before {cell.path}.')
+        return run_dir.DEADLINE
+      stopped = run_cell(cell, args, log, deadline)
+      if stopped == run_dir.DEADLINE:
+        folder = stash(cell, args)
+        log(f'{cell.path}: out of time (--hours {args.hours:g}); '
+            + (f'stashed in {folder}' if folder else 'no checkpoint yet'))
       if stopped:
         return stopped
     return None
@@ -461,6 +487,10 @@ def main(argv=None):
                           __doc__.splitlines()[0])
   if args.report or args.dry_run or args.stash:
     return
+  if stopped == run_dir.DEADLINE:
+    print(f'Out of time: commit {args.partial} and run the same coop-paper '
+          'command again to continue.', flush=True)
+    sys.exit(EXIT_OUT_OF_TIME)
   if stopped:
     print(f'Stopped by {stopped}; run the same coop-paper command again to '
           'continue.', flush=True)

@@ -15,8 +15,9 @@ Leftovers are removed only once their writer's process is gone
 (`remove_stale`). These are the project's only writers of whole files and
 directories; checkpoints go through orbax, which finalises its own.
 
-`GracefulStop` turns the first Ctrl-C / SIGTERM into a request the training
-loop polls, so a run can stop with a checkpoint instead of losing an update.
+`GracefulStop` turns the first Ctrl-C / SIGTERM (or a deadline passing) into a
+request the training loop polls, so a run can stop with a checkpoint instead
+of losing an update.
 """
 import csv
 import errno
@@ -30,6 +31,8 @@ import shutil
 import signal
 import socket
 import threading
+import time
+from typing import Optional
 
 LOCK_FILE = 'writer.lock'
 _LEFTOVER = re.compile(r'\.(tmp|old)-(\d+)$')
@@ -271,16 +274,32 @@ class MetricsLog:
       self._tb.close()
 
 
-class GracefulStop:
-  """Context manager: the first SIGINT / SIGTERM sets `requested`, which the
-  training loop polls (to checkpoint and stop); a second one interrupts at
-  once. Only installs handlers in the main thread."""
+DEADLINE = 'deadline'
+"""`GracefulStop.reason` when its deadline, not a signal, stopped the run."""
 
-  def __init__(self):
-    self.requested = False
-    self.signal = None
-    """The name of the signal that requested the stop ('SIGTERM'...)."""
+
+class GracefulStop:
+  """Context manager: the first SIGINT / SIGTERM, or the wall clock passing
+  `deadline` (seconds since the epoch, `time.time()`; None for none), sets
+  `requested`, which the training loop polls (to checkpoint and stop); a
+  second signal interrupts at once. Only installs handlers in the main
+  thread."""
+
+  def __init__(self, deadline: Optional[float] = None):
+    self._requested = False
+    self.reason = None
+    """What requested the stop: the signal's name ('SIGTERM'...) or
+    `DEADLINE`."""
+    self.deadline = deadline
     self._previous = {}
+
+  @property
+  def requested(self) -> bool:
+    if (not self._requested and self.deadline is not None
+        and time.time() >= self.deadline):
+      self._requested, self.reason = True, DEADLINE
+      print('Time limit reached: stopping after this update.', flush=True)
+    return self._requested
 
   def __enter__(self):
     if threading.current_thread() is threading.main_thread():
@@ -289,12 +308,12 @@ class GracefulStop:
     return self
 
   def _handle(self, signum, frame):
-    if self.requested:
+    if self._requested:
       signal.signal(signum, self._previous.get(signum, signal.SIG_DFL))
       raise KeyboardInterrupt
-    self.requested = True
-    self.signal = signal.Signals(signum).name
-    print(f'{self.signal}: stopping after this update (again to interrupt '
+    self._requested = True
+    self.reason = signal.Signals(signum).name
+    print(f'{self.reason}: stopping after this update (again to interrupt '
           'now).', flush=True)
 
   def __exit__(self, *exc):

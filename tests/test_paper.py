@@ -4,6 +4,7 @@ import dataclasses
 import json
 import os
 import shutil
+import types
 
 import imageio
 import pytest
@@ -18,6 +19,7 @@ from runners import marl_eval
 from runners import paper
 from runners import paper_plan
 from runners import paper_report
+from runners import run_dir
 from tests.test_train import controller  # pylint: disable=unused-import
 from tests.test_train import STEPS
 from tests.test_train import TINY
@@ -159,6 +161,48 @@ def test_a_run_of_other_settings_is_not_taken_for_the_cell(tmp_path, capsys):
   assert [line.split()[1] for line in lines[1::2][:2]] == ['foreign'] * 2
   assert lines[2].startswith('  ! ') and 'Move it away' in lines[2]
   assert lines[-1].startswith('2 cells, ~')
+
+
+def test_out_of_hours_the_running_cell_stops_is_stashed_and_none_starts(
+    controller, tmp_path, monkeypatch, capsys):  # pylint: disable=redefined-outer-name
+  first, second = plan = [dataclasses.replace(cell, budget=4 * STEPS)
+                          for cell in _tiny_plan(controller)]
+  monkeypatch.setattr(paper_plan, 'PLAN', plan)
+  # The training loop's clock (`GracefulStop`) jumps past any deadline
+  # after update 2 of the first cell's 4.
+  clock = types.SimpleNamespace(time=lambda: 0.0)
+  monkeypatch.setattr(run_dir, 'time', clock)
+  real_train = learner_loop.train
+
+  def train(args, deadline=None):
+    def on_update(update, *_):
+      if update == 2:
+        clock.time = lambda: float('inf')
+    return real_train(args, on_update=on_update, deadline=deadline)
+  monkeypatch.setattr(learner_loop, 'train', train)
+  args = _args(tmp_path)
+  with pytest.raises(SystemExit) as exit_info:
+    paper.main([f'--{k}={v}' for k, v in dataclasses.asdict(args).items()
+                if k in ('results', 'runs', 'partial', 'actors', 'episodes',
+                         'baselines')] + ['--no-progress', '--hours', '2.5'])
+  assert exit_info.value.code == paper.EXIT_OUT_OF_TIME
+  out = capsys.readouterr().out
+  assert 'Time limit reached: stopping after this update.' in out
+  stashed = paper.partial_directory(first, args)
+  assert f'{first.path}: out of time (--hours 2.5); stashed in {stashed}' in out
+  assert os.listdir(os.path.join(stashed, 'checkpoints')) == ['2']
+  assert [int(r['update']) for r in _rows(
+      os.path.join(stashed, 'metrics.csv'))] == [1, 2]
+  assert not os.path.exists(paper.results_directory(first, args))
+  assert not os.path.exists(paper.run_directory(second, args))  # Not begun.
+  # The next session has only the stash, and continues from it.
+  shutil.rmtree(args.runs)
+  assert paper.status(first, args) == paper.Status('partial', 2 * STEPS)
+  # The clock itself: no deadline never stops; a passed one does, once.
+  with run_dir.GracefulStop() as stop:
+    assert not stop.requested and stop.reason is None
+  with run_dir.GracefulStop(deadline=1.0) as stop:
+    assert stop.requested and stop.reason == run_dir.DEADLINE
 
 
 def test_quick_runs_keep_off_the_plans_folders(tmp_path):

@@ -111,6 +111,17 @@ def test_training_takes_the_lock_before_checking_the_directory(controller,
   assert not os.path.exists(logdir)  # The lock's own directory, removed.
 
 
+def test_a_stop_between_checkpoints_still_saves_its_update(controller,
+                                                         tmp_path):
+  # Checkpoints every 2 updates; SIGTERM after update 1's save was decided.
+  logdir = str(tmp_path / 'run')
+  summary = learner_loop.train(
+      _args(logdir, controller, total_steps=4 * STEPS, checkpoint_every=2),
+      on_update=lambda *_: os.kill(os.getpid(), signal.SIGTERM))
+  assert (summary['stopped_by'], summary['update']) == ('SIGTERM', 1)
+  assert checkpoints.read_state(checkpoints.resolve(logdir))['update'] == 1
+
+
 def test_only_dead_writers_temporaries_are_removed(tmp_path):
   directory = str(tmp_path / 'controller')
   holder = _holder('pass')
