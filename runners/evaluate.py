@@ -157,14 +157,20 @@ def _act(actors, batch, models):
   return actions
 
 
+def copy_seeds(seed: int, num_envs: int) -> np.ndarray:
+  """The environment seeds of the `num_envs` copies that play from the
+  evaluation seed `seed`; the first is also the filmed episode's (`film`)."""
+  return np.random.SeedSequence([seed]).generate_state(num_envs) >> 1
+
+
 def play(spec, config, models, seed: int, episodes: int, num_envs: int,
          deterministic: bool = True) -> list[dict]:
   """`episodes` episode metric dicts, `num_envs` copies playing fixed
   shares."""
   from runners import rollout  # pylint: disable=g-import-not-at-top
   num_envs = min(num_envs, episodes)
-  seeds = np.random.SeedSequence([seed]).generate_state(num_envs) >> 1
-  batch = rollout.EnvBatch(spec, config, seeds, global_state=False)
+  batch = rollout.EnvBatch(spec, config, copy_seeds(seed, num_envs),
+                           global_state=False)
   quota = [episodes // num_envs + (e < episodes % num_envs)
            for e in range(num_envs)]
   results = [[] for _ in range(num_envs)]
@@ -189,7 +195,7 @@ class _Filming:
     self._env, self._size = env, size
     self._camera, self._render = camera.FramingCamera(), camera.render
     self._writer = video.open_video(path, round(1 / env.control_timestep()))
-    self.frames, self.done, self.success = 0, False, None
+    self.frames, self.done = 0, False
 
   def __getattr__(self, name):
     return getattr(self._env, name)
@@ -217,7 +223,6 @@ class _Filming:
     self._film()
     if timestep.last() and not self.done:
       self.done = True
-      self.success = bool(self._env.episode_metrics()['success'])
       self._writer.close()
     return timestep
 
@@ -228,13 +233,13 @@ class _Filming:
 
 
 def film(spec, config, models, seed: int, path: str, size=(640, 480),
-         deterministic: bool = True) -> tuple[int, bool]:
-  """Writes one episode to the mp4 `path`; returns (frames, whether the
-  episode succeeded)."""
+         deterministic: bool = True) -> tuple[int, dict]:
+  """Writes one episode to the mp4 `path`, the first that `play` plays
+  from `seed`; returns (frames, the episode's metrics)."""
   from runners import rollout  # pylint: disable=g-import-not-at-top
   filming = []
   batch = rollout.EnvBatch(
-      spec, config, [seed], global_state=False,
+      spec, config, copy_seeds(seed, 1), global_state=False,
       wrap_raw=lambda env: filming.append(_Filming(env, path, size))
       or filming[-1])
   try:
@@ -245,7 +250,7 @@ def film(spec, config, models, seed: int, path: str, size=(640, 480),
       _, ended, _ = batch.step(_act(actors, batch, models))
   finally:
     batch.close()
-  return filming[0].frames, filming[0].success
+  return filming[0].frames, ended[0]
 
 
 def mean_and_error(values):
@@ -290,8 +295,9 @@ def evaluate(args: EvalArgs, log=None) -> dict:
                       'episodes': [metrics_lib.episode_figures(e)
                                    for e in played]})
     if args.video and len(per_model) == 1:
-      filmed = film(spec, config, models, args.seeds[0], args.video,
-                    (args.width, args.height), not args.stochastic)[1]
+      filmed = bool(film(spec, config, models, args.seeds[0], args.video,
+                         (args.width, args.height),
+                         not args.stochastic)[1]['success'])
   success, success_se = mean_and_error([e['success'] for e in episodes])
   ret, ret_se = mean_and_error([e['return'] for e in episodes])
   out = {'description': description, 'episodes': len(episodes),

@@ -259,6 +259,17 @@ def test_the_filmed_episode_has_a_frame_per_control_step(hrl_run, tmp_path):
   assert frames == 1 + 20  # The first observation, then 1 s of 50 ms steps.
 
 
+def test_the_filmed_episode_is_the_first_evaluated_one(hrl_run, tmp_path):
+  args = evaluate.EvalArgs(checkpoint=[hrl_run], time_limit=1.0)
+  spec, config, models, _ = evaluate.load_model(hrl_run, args)
+  played = evaluate.play(spec, config, models, 5, 2, 2)
+  _, filmed = evaluate.film(spec, config, models, 5, str(tmp_path / 'e.mp4'),
+                            (64, 48))
+  assert played[0]['return'] != played[1]['return']  # Other starts.
+  assert filmed['return'] == played[0]['return']
+  assert filmed['success'] == played[0]['success']
+
+
 def test_the_stability_figures_are_logged_and_checkpointed(hrl_run):
   rows = _rows(hrl_run)
   for name in ('value_loss', 'approx_kl', 'learning_rate', 'action_std',
