@@ -15,8 +15,9 @@ Prints the success rate and mean return with their standard errors over all
 models x seeds x episodes (and, for several models, the spread between
 models). The task and agent count default to the training ones; any other
 count works (one policy per species, fixed-size exteroception). `--video`
-films one episode (first model, first seed) headless, one frame per control
-step, with `coop_suite.camera.FramingCamera`. `--json` writes every
+films the first evaluated episode (first model, first seed, first copy) as
+it is played, headless, one frame per control step, with
+`coop_suite.camera.FramingCamera`. `--json` writes every
 episode's figures in marl-eval's layout (`runners.marl_eval`).
 """
 import dataclasses
@@ -52,7 +53,9 @@ class EvalArgs:
   seeds: tuple[int, ...] = fields.field((0,), fields.SEED)
   """Environment (and action noise) seeds."""
   envs: int = fields.field(10, fields.COUNT)
-  """Environment copies stepped together."""
+  """Environment copies stepped together. The same seeds give the same
+  episodes only with the same count: the networks' float32 outputs round
+  differently with the batch's size, and contacts amplify that."""
   stochastic: bool = False
   """Sample commands instead of taking the policy's mean."""
   stage: str = ''
@@ -66,7 +69,7 @@ class EvalArgs:
   """Lower layer folder; empty for the run's own copy (else the shipped
   weights)."""
   video: str = ''
-  """mp4 file to film one episode into; empty for none."""
+  """mp4 file to film the first evaluated episode into; empty for none."""
   json: str = ''
   """Also write every episode's figures to this file in marl-eval's JSON
   layout (runners.marl_eval; docs/training.md, "Evaluation")."""
@@ -157,20 +160,26 @@ def _act(actors, batch, models):
   return actions
 
 
-def copy_seeds(seed: int, num_envs: int) -> np.ndarray:
-  """The environment seeds of the `num_envs` copies that play from the
-  evaluation seed `seed`; the first is also the filmed episode's (`film`)."""
-  return np.random.SeedSequence([seed]).generate_state(num_envs) >> 1
-
-
 def play(spec, config, models, seed: int, episodes: int, num_envs: int,
-         deterministic: bool = True) -> list[dict]:
+         deterministic: bool = True, video: str = '', size=(640, 480)
+         ) -> list[dict]:
   """`episodes` episode metric dicts, `num_envs` copies playing fixed
-  shares."""
+  shares, the first copy's first. With `video`, that first episode is
+  filmed into the mp4 `video` at `size` (width, height) as it is played:
+  the film is an evaluated episode, not a replay (a batch of another size
+  rounds the networks' outputs differently, so a replay could diverge)."""
   from runners import rollout  # pylint: disable=g-import-not-at-top
   num_envs = min(num_envs, episodes)
-  batch = rollout.EnvBatch(spec, config, copy_seeds(seed, num_envs),
-                           global_state=False)
+  seeds = np.random.SeedSequence([seed]).generate_state(num_envs) >> 1
+  filming = []
+
+  def film_first(env):
+    if video and not filming:
+      env = _Filming(env, video, size)
+      filming.append(env)
+    return env
+  batch = rollout.EnvBatch(spec, config, seeds, global_state=False,
+                           wrap_raw=film_first)
   quota = [episodes // num_envs + (e < episodes % num_envs)
            for e in range(num_envs)]
   results = [[] for _ in range(num_envs)]
@@ -195,7 +204,7 @@ class _Filming:
     self._env, self._size = env, size
     self._camera, self._render = camera.FramingCamera(), camera.render
     self._writer = video.open_video(path, round(1 / env.control_timestep()))
-    self.frames, self.done = 0, False
+    self.done = False
 
   def __getattr__(self, name):
     return getattr(self._env, name)
@@ -204,7 +213,6 @@ class _Filming:
     if not self.done:
       self._writer.append_data(self._render(self._env, self._camera,
                                             *self._size))
-      self.frames += 1
 
   def reset(self):
     timestep = self._env.reset()
@@ -232,27 +240,6 @@ class _Filming:
     self._env.close()
 
 
-def film(spec, config, models, seed: int, path: str, size=(640, 480),
-         deterministic: bool = True) -> tuple[int, dict]:
-  """Writes one episode to the mp4 `path`, the first that `play` plays
-  from `seed`; returns (frames, the episode's metrics)."""
-  from runners import rollout  # pylint: disable=g-import-not-at-top
-  filming = []
-  batch = rollout.EnvBatch(
-      spec, config, copy_seeds(seed, 1), global_state=False,
-      wrap_raw=lambda env: filming.append(_Filming(env, path, size))
-      or filming[-1])
-  try:
-    actors = _actors(batch, models, seed, deterministic)
-    ended = []
-    while not ended:  # The batch's word, not the film's: a step the film
-      # missed must not make it play forever.
-      _, ended, _ = batch.step(_act(actors, batch, models))
-  finally:
-    batch.close()
-  return filming[0].frames, ended[0]
-
-
 def mean_and_error(values):
   """(mean, standard error of the mean) of `values`; the error is 0 for one
   value."""
@@ -277,8 +264,12 @@ def evaluate(args: EvalArgs, log=None) -> dict:
                    f'{config.agent}')
     played = []
     for seed in args.seeds:
+      # The first model's first episode is filmed (`play`).
+      video = args.video if not (index or played) else ''
       played += play(spec, config, models, seed, args.episodes, args.envs,
-                     not args.stochastic)
+                     not args.stochastic, video, (args.width, args.height))
+      if video:
+        filmed = bool(played[0]['success'])
       log(f'model {index + 1}/{len(args.checkpoint)}, seed {seed}: '
           f'{args.episodes} episodes, success '
           f'{100 * np.mean([e["success"] for e in played[-args.episodes:]]):.1f}%')
@@ -294,10 +285,6 @@ def evaluate(args: EvalArgs, log=None) -> dict:
                       'seed': config.seed,
                       'episodes': [metrics_lib.episode_figures(e)
                                    for e in played]})
-    if args.video and len(per_model) == 1:
-      filmed = bool(film(spec, config, models, args.seeds[0], args.video,
-                         (args.width, args.height),
-                         not args.stochastic)[1]['success'])
   success, success_se = mean_and_error([e['success'] for e in episodes])
   ret, ret_se = mean_and_error([e['return'] for e in episodes])
   out = {'description': description, 'episodes': len(episodes),

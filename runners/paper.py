@@ -155,11 +155,18 @@ def command(cell: paper_plan.Cell, args: PaperArgs) -> str:
                           skip=('progress', 'resume'))
 
 
+def eval_flags(args: PaperArgs) -> str:
+  """`coop-eval`'s flags of the paper's protocol (`--envs` too: the same
+  seeds give the same episodes only with the same count)."""
+  return (f'--episodes {args.episodes} --seeds {args.eval_seed} '
+          f'--envs {args.eval_envs}')
+
+
 def eval_command(cell: paper_plan.Cell, n_agents: int,
                  args: PaperArgs) -> str:
   """The `coop-eval` command of one evaluation of the cell's result."""
   words = [f'coop-eval --checkpoint {results_directory(cell, args)}',
-           f'--episodes {args.episodes} --seeds {args.eval_seed}']
+           eval_flags(args)]
   if n_agents != cell.n_agents:
     words.append(f'--n-agents {n_agents}')
   return ' '.join(words)

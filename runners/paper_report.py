@@ -296,8 +296,8 @@ def report(args: paper.PaperArgs, plan=None) -> str:
       lines += [f'![{caption}]({os.path.relpath(path, base)})', '']
   lines += ['### Commands', '',
             f'Each cell: `coop-paper --only <path>` runs the command below, '
-            f'then `coop-eval --checkpoint {args.results}/<cell> --episodes '
-            f'{args.episodes} --seeds {args.eval_seed}` (`--n-agents N` for '
+            f'then `coop-eval --checkpoint {args.results}/<cell> '
+            f'{paper.eval_flags(args)}` (`--n-agents N` for '
             'the zero-shot populations) on its final checkpoint.', '',
             f'<details><summary>The {len(plan)} cells\' commands</summary>',
             '', '```']
