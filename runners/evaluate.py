@@ -77,12 +77,17 @@ class EvalArgs:
   """Video width in pixels."""
   height: int = fields.field(480, fields.COUNT)
   """Video height in pixels."""
+  strip: str = ''
+  """With --video: also this PNG, the filmed episode's frames at 0, 1/4,
+  1/2, 3/4 and its end side by side at half size (a still for docs)."""
 
   def __post_init__(self):
     if not self.checkpoint:
       raise ValueError('Give at least one --checkpoint DIR.')
     if not self.seeds:
       raise ValueError('Give at least one seed to --seeds.')
+    if self.strip and not self.video:
+      raise ValueError('--strip needs --video FILE.mp4 (it is cut from it).')
     fields.check(self)
 
 
@@ -270,6 +275,9 @@ def evaluate(args: EvalArgs, log=None) -> dict:
                      not args.stochastic, video, (args.width, args.height))
       if video:
         filmed = bool(played[0]['success'])
+        if args.strip:
+          from runners import video as video_lib  # pylint: disable=g-import-not-at-top
+          video_lib.write_strip(args.video, args.strip)
       log(f'model {index + 1}/{len(args.checkpoint)}, seed {seed}: '
           f'{args.episodes} episodes, success '
           f'{100 * np.mean([e["success"] for e in played[-args.episodes:]]):.1f}%')

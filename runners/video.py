@@ -69,6 +69,16 @@ def open_video(path, fps):
                             macro_block_size=8)
 
 
+def write_strip(video, png, count=5):
+  """Writes to `png` `count` evenly spaced frames of the mp4 `video` (its
+  first and last included) side by side at half size."""
+  with imageio.get_reader(video) as reader:
+    frames = [frame[::2, ::2] for frame in reader]
+  picked = np.linspace(0, len(frames) - 1, count).round().astype(int)
+  os.makedirs(os.path.dirname(os.path.abspath(png)), exist_ok=True)
+  imageio.imwrite(png, np.concatenate([frames[i] for i in picked], axis=1))
+
+
 def make_policy(name, env, seed):
   """A function timestep -> actions [n_agents, 8] for a non-learned policy."""
   if name not in POLICIES:

@@ -122,6 +122,8 @@ def test_help_shows_every_flag_with_its_docstring(cls, capsys):
     (video.main, ['--policy', 'best', '--png', 'x.png'], '--policy'),
     (evaluate.main, ['--checkpoint', 'x', '--n-agents', '-2'],
      '--n-agents must be 0 (the training one), or >= 1, got -2.'),
+    (evaluate.main, ['--checkpoint', 'x', '--strip', 'x.png'],
+     '--strip needs --video FILE.mp4'),
     (pretrain_lowlevel.main, ['--discount', '2'], '--discount'),
     (eval_lowlevel.main, ['--episodes', '0'], '--episodes'),
 ])

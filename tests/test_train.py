@@ -29,6 +29,7 @@ from runners import evaluate
 from runners import learner_loop
 from runners import run_dir
 from runners import train
+from runners import video as video_lib
 
 # 2 copies x 4 commands of 0.1 s (2 control steps): 16 env steps/update.
 TINY = dict(n_agents=2, actors=0, envs_per_actor=2, command_period=0.1,
@@ -263,6 +264,8 @@ def test_the_filmed_episode_is_the_first_evaluated_one(hrl_run, tmp_path):
   with imageio.get_reader(video) as reader:
     # The first observation, then 1 s of 50 ms steps: one episode.
     assert reader.count_frames() == 1 + 20
+  video_lib.write_strip(video, str(tmp_path / 'strip.png'), count=3)
+  assert imageio.imread(tmp_path / 'strip.png').shape == (24, 3 * 32, 3)
 
 
 def test_the_stability_figures_are_logged_and_checkpointed(hrl_run):
