@@ -165,6 +165,12 @@ def _act(actors, batch, models):
   return actions
 
 
+def copy_seeds(seed: int, num_envs: int) -> np.ndarray:
+  """The environment seeds of the `num_envs` copies that `play` plays
+  from the evaluation seed `seed`."""
+  return np.random.SeedSequence([seed]).generate_state(num_envs) >> 1
+
+
 def play(spec, config, models, seed: int, episodes: int, num_envs: int,
          deterministic: bool = True, video: str = '', size=(640, 480)
          ) -> list[dict]:
@@ -175,7 +181,6 @@ def play(spec, config, models, seed: int, episodes: int, num_envs: int,
   rounds the networks' outputs differently, so a replay could diverge)."""
   from runners import rollout  # pylint: disable=g-import-not-at-top
   num_envs = min(num_envs, episodes)
-  seeds = np.random.SeedSequence([seed]).generate_state(num_envs) >> 1
   filming = []
 
   def film_first(env):
@@ -183,13 +188,13 @@ def play(spec, config, models, seed: int, episodes: int, num_envs: int,
       env = _Filming(env, video, size)
       filming.append(env)
     return env
-  batch = rollout.EnvBatch(spec, config, seeds, global_state=False,
-                           wrap_raw=film_first)
+  batch = rollout.EnvBatch(spec, config, copy_seeds(seed, num_envs),
+                           global_state=False, wrap_raw=film_first)
   quota = [episodes // num_envs + (e < episodes % num_envs)
            for e in range(num_envs)]
   results = [[] for _ in range(num_envs)]
-  actors = _actors(batch, models, seed, deterministic)
   try:
+    actors = _actors(batch, models, seed, deterministic)
     while any(len(r) < q for r, q in zip(results, quota)):
       _, ended, _ = batch.step(_act(actors, batch, models))
       for episode in ended:

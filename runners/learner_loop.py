@@ -117,8 +117,8 @@ def train(args: config_lib.TrainArgs,
   'stopped_by' (None, a signal's name, or `run_dir.DEADLINE`).
 
   `on_update(update, row, pool)` is called after every update. Past
-  `deadline` (`time.time()` seconds) the run stops after its update with a
-  checkpoint, as on SIGTERM.
+  `deadline` (`run_dir.clock()` seconds) the run stops after its update
+  with a checkpoint, as on SIGTERM.
   """
   # Options the task refuses (a stage it lacks, an agent count out of its
   # range) fail here, before the run directory exists.

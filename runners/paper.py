@@ -29,7 +29,6 @@ import os
 import shutil
 import signal
 import sys
-import time
 from typing import Callable, Optional
 
 from agents import fields
@@ -385,7 +384,8 @@ def run_cell(cell: paper_plan.Cell, args: PaperArgs,
              deadline: Optional[float] = None) -> Optional[str]:
   """Trains (or resumes) and evaluates one cell, then publishes it;
   returns what stopped its training early (a signal's name, or
-  `run_dir.DEADLINE` once `time.time()` passes `deadline`), else None."""
+  `run_dir.DEADLINE` once `run_dir.clock()` passes `deadline`), else
+  None."""
   from runners import checkpoints  # pylint: disable=g-import-not-at-top
   from runners import learner_loop  # pylint: disable=g-import-not-at-top
   state = status(cell, args)
@@ -425,7 +425,7 @@ def run_plan(args: PaperArgs, plan=None,
   """Runs every selected cell that is not done, in plan order; returns what
   stopped it early (`run_cell`), else None. Out of `--hours`, the cell it
   stopped is stashed and no other starts."""
-  deadline = time.time() + args.hours * 3600 if args.hours else None
+  deadline = run_dir.clock() + args.hours * 3600 if args.hours else None
   default = PaperArgs()
   if args.budget and (args.results == default.results
                       or args.runs == default.runs
@@ -446,14 +446,17 @@ def run_plan(args: PaperArgs, plan=None,
       args.ray_address, num_cpus=max(os.cpu_count(), args.actors))
   try:
     for cell in cells:
-      if deadline and time.time() >= deadline:
+      if deadline and run_dir.clock() >= deadline:
         log(f'Out of time (--hours {args.hours:g}) before {cell.path}.')
         return run_dir.DEADLINE
       stopped = run_cell(cell, args, log, deadline)
       if stopped == run_dir.DEADLINE:
         folder = stash(cell, args)
+        if not folder:  # Stopped before its first update: start afresh.
+          shutil.rmtree(run_directory(cell, args), ignore_errors=True)
         log(f'{cell.path}: out of time (--hours {args.hours:g}); '
-            + (f'stashed in {folder}' if folder else 'no checkpoint yet'))
+            + (f'stashed in {folder}: commit it' if folder
+               else 'no update yet, nothing to stash'))
       if stopped:
         return stopped
     return None
@@ -495,8 +498,8 @@ def main(argv=None):
   if args.report or args.dry_run or args.stash:
     return
   if stopped == run_dir.DEADLINE:
-    print(f'Out of time: commit {args.partial} and run the same coop-paper '
-          'command again to continue.', flush=True)
+    print('Out of time: run the same coop-paper command again to continue '
+          '(after committing a stash, if one was made).', flush=True)
     sys.exit(EXIT_OUT_OF_TIME)
   if stopped:
     print(f'Stopped by {stopped}; run the same coop-paper command again to '

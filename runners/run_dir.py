@@ -277,16 +277,20 @@ class MetricsLog:
 DEADLINE = 'deadline'
 """`GracefulStop.reason` when its deadline, not a signal, stopped the run."""
 
+clock = time.monotonic
+"""The clock of `GracefulStop`'s deadlines (seconds): whoever sets one
+reads this clock (`coop-paper --hours`)."""
+
 
 class GracefulStop:
-  """Context manager: the first SIGINT / SIGTERM, or the wall clock passing
-  `deadline` (seconds since the epoch, `time.time()`; None for none), sets
-  `requested`, which the training loop polls (to checkpoint and stop); a
-  second signal interrupts at once. Only installs handlers in the main
-  thread."""
+  """Context manager: the first SIGINT / SIGTERM, or `clock()` passing
+  `deadline` (None for none), sets `requested`, which the training loop
+  polls (to checkpoint and stop); a second signal interrupts at once. Only
+  installs handlers in the main thread."""
 
   def __init__(self, deadline: Optional[float] = None):
     self._requested = False
+    self._signalled = False
     self.reason = None
     """What requested the stop: the signal's name ('SIGTERM'...) or
     `DEADLINE`."""
@@ -296,9 +300,9 @@ class GracefulStop:
   @property
   def requested(self) -> bool:
     if (not self._requested and self.deadline is not None
-        and time.time() >= self.deadline):
+        and clock() >= self.deadline):
       self._requested, self.reason = True, DEADLINE
-      print('Time limit reached: stopping after this update.', flush=True)
+      print('Time limit reached: stopping with a checkpoint.', flush=True)
     return self._requested
 
   def __enter__(self):
@@ -308,13 +312,15 @@ class GracefulStop:
     return self
 
   def _handle(self, signum, frame):
-    if self._requested:
+    if self._signalled:
       signal.signal(signum, self._previous.get(signum, signal.SIG_DFL))
       raise KeyboardInterrupt
-    self._requested = True
-    self.reason = signal.Signals(signum).name
-    print(f'{self.reason}: stopping after this update (again to interrupt '
-          'now).', flush=True)
+    # After the deadline too, the first signal (e.g. a job's scheduler
+    # ending it) lets the checkpoint finish.
+    self._signalled = self._requested = True
+    self.reason = self.reason or signal.Signals(signum).name
+    print(f'{signal.Signals(signum).name}: stopping after this update '
+          '(again to interrupt now).', flush=True)
 
   def __exit__(self, *exc):
     for sig, handler in self._previous.items():

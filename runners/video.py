@@ -73,10 +73,10 @@ def write_strip(video, png, count=5):
   """Writes to `png` `count` evenly spaced frames of the mp4 `video` (its
   first and last included) side by side at half size."""
   with imageio.get_reader(video) as reader:
-    frames = [frame[::2, ::2] for frame in reader]
-  picked = np.linspace(0, len(frames) - 1, count).round().astype(int)
+    picked = np.linspace(0, reader.count_frames() - 1, count).round()
+    frames = [reader.get_data(int(i))[::2, ::2] for i in picked]
   os.makedirs(os.path.dirname(os.path.abspath(png)), exist_ok=True)
-  imageio.imwrite(png, np.concatenate([frames[i] for i in picked], axis=1))
+  imageio.imwrite(png, np.concatenate(frames, axis=1))
 
 
 def make_policy(name, env, seed):

@@ -4,7 +4,7 @@ import dataclasses
 import json
 import os
 import shutil
-import types
+import signal
 
 import imageio
 import pytest
@@ -168,41 +168,78 @@ def test_out_of_hours_the_running_cell_stops_is_stashed_and_none_starts(
   first, second = plan = [dataclasses.replace(cell, budget=4 * STEPS)
                           for cell in _tiny_plan(controller)]
   monkeypatch.setattr(paper_plan, 'PLAN', plan)
-  # The training loop's clock (`GracefulStop`) jumps past any deadline
-  # after update 2 of the first cell's 4.
-  clock = types.SimpleNamespace(time=lambda: 0.0)
-  monkeypatch.setattr(run_dir, 'time', clock)
+  # The deadlines' clock reads 0 until the update named here ends, then
+  # jumps past any deadline.
+  clock = {'now': 0.0, 'jump_after': 2}
+  monkeypatch.setattr(run_dir, 'clock', lambda: clock['now'])
   real_train = learner_loop.train
 
   def train(args, deadline=None):
     def on_update(update, *_):
-      if update == 2:
-        clock.time = lambda: float('inf')
+      if update == clock['jump_after']:
+        clock['now'] = float('inf')
     return real_train(args, on_update=on_update, deadline=deadline)
   monkeypatch.setattr(learner_loop, 'train', train)
   args = _args(tmp_path)
-  with pytest.raises(SystemExit) as exit_info:
-    paper.main([f'--{k}={v}' for k, v in dataclasses.asdict(args).items()
-                if k in ('results', 'runs', 'partial', 'actors', 'episodes',
-                         'baselines')] + ['--no-progress', '--hours', '2.5'])
-  assert exit_info.value.code == paper.EXIT_OUT_OF_TIME
-  out = capsys.readouterr().out
-  assert 'Time limit reached: stopping after this update.' in out
+  argv = [f'--{k}={v}' for k, v in dataclasses.asdict(args).items()
+          if k in ('results', 'runs', 'partial', 'actors', 'episodes',
+                   'eval_envs', 'baselines')] + ['--no-progress']
+
+  def run(*flags):
+    clock['now'] = 0.0
+    with pytest.raises(SystemExit) as exit_info:
+      paper.main(argv + list(flags))
+    return exit_info.value.code, capsys.readouterr().out
+
+  # Out of time in the first cell's update 2 of 4: stopped and stashed.
+  code, out = run('--hours', '2.5')
+  assert code == paper.EXIT_OUT_OF_TIME
+  assert 'Time limit reached: stopping with a checkpoint.' in out
   stashed = paper.partial_directory(first, args)
-  assert f'{first.path}: out of time (--hours 2.5); stashed in {stashed}' in out
+  assert (f'{first.path}: out of time (--hours 2.5); stashed in {stashed}'
+          in out)
   assert os.listdir(os.path.join(stashed, 'checkpoints')) == ['2']
   assert [int(r['update']) for r in _rows(
       os.path.join(stashed, 'metrics.csv'))] == [1, 2]
   assert not os.path.exists(paper.results_directory(first, args))
   assert not os.path.exists(paper.run_directory(second, args))  # Not begun.
-  # The next session has only the stash, and continues from it.
+  # The next session has only the stash: the first cell continues from it
+  # and ends in time (evaluated and published); time is up before the
+  # second one starts.
   shutil.rmtree(args.runs)
   assert paper.status(first, args) == paper.Status('partial', 2 * STEPS)
-  # The clock itself: no deadline never stops; a passed one does, once.
+  clock['jump_after'] = 4
+  code, out = run('--hours', '2.5')
+  assert code == paper.EXIT_OUT_OF_TIME
+  assert paper.status(first, args).state == 'done'
+  assert f'Out of time (--hours 2.5) before {second.path}.' in out
+  assert not os.path.exists(paper.run_directory(second, args))
+  # Out of time before its first update: nothing to stash, and the run
+  # directory (its header, the lower layer's copy) goes, so that the next
+  # command starts the cell afresh instead of refusing to write over it.
+  clock['jump_after'] = 0
+  monkeypatch.setattr(run_dir, 'clock', lambda: (
+      clock['now'] if os.path.exists(paper.run_directory(second, args))
+      else 0.0))
+  clock['now'] = float('inf')
+  with pytest.raises(SystemExit) as exit_info:
+    paper.main(argv + ['--hours', '2.5'])
+  assert exit_info.value.code == paper.EXIT_OUT_OF_TIME
+  assert 'no update yet, nothing to stash' in capsys.readouterr().out
+  assert not os.path.exists(paper.run_directory(second, args))
+  assert not os.path.exists(paper.partial_directory(second, args))
+  assert paper.status(second, args).state == 'todo'
+
+
+def test_a_deadline_stops_once_and_leaves_the_first_signal_graceful():
   with run_dir.GracefulStop() as stop:
     assert not stop.requested and stop.reason is None
-  with run_dir.GracefulStop(deadline=1.0) as stop:
+  with run_dir.GracefulStop(deadline=run_dir.clock() - 1) as stop:
     assert stop.requested and stop.reason == run_dir.DEADLINE
+    os.kill(os.getpid(), signal.SIGTERM)  # Still graceful: no interrupt.
+    assert stop.requested and stop.reason == run_dir.DEADLINE
+    with pytest.raises(KeyboardInterrupt):
+      os.kill(os.getpid(), signal.SIGTERM)  # The second one interrupts.
 
 
 def test_quick_runs_keep_off_the_plans_folders(tmp_path):

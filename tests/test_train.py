@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 import coop_suite
+from coop_suite import camera
 from agents import normalization
 from agents import observations as obs_lib
 from agents.hierarchy import builder as hierarchy_builder
@@ -264,6 +265,18 @@ def test_the_filmed_episode_is_the_first_evaluated_one(hrl_run, tmp_path):
   with imageio.get_reader(video) as reader:
     # The first observation, then 1 s of 50 ms steps: one episode.
     assert reader.count_frames() == 1 + 20
+    first = reader.get_data(0).astype(float)
+  # Of the two copies' first frames, the film's is the first copy's (the
+  # mp4 is lossy: the nearer one).
+  starts = []
+  for copy_seed in evaluate.copy_seeds(5, 2):
+    bare = []
+    env = spec.make(copy_seed, wrap_raw=lambda e: bare.append(e) or e)  # pylint: disable=cell-var-from-loop
+    env.reset()
+    starts.append(camera.render(bare[0], camera.FramingCamera(), 64, 48))
+    env.close()
+  distances = [np.abs(first - start).mean() for start in starts]
+  assert distances[0] < distances[1], distances
   video_lib.write_strip(video, str(tmp_path / 'strip.png'), count=3)
   assert imageio.imread(tmp_path / 'strip.png').shape == (24, 3 * 32, 3)
 
