@@ -289,7 +289,6 @@ class GracefulStop:
   installs handlers in the main thread."""
 
   def __init__(self, deadline: Optional[float] = None):
-    self._requested = False
     self._signalled = False
     self.reason = None
     """What requested the stop: the signal's name ('SIGTERM'...) or
@@ -299,11 +298,11 @@ class GracefulStop:
 
   @property
   def requested(self) -> bool:
-    if (not self._requested and self.deadline is not None
+    if (self.reason is None and self.deadline is not None
         and clock() >= self.deadline):
-      self._requested, self.reason = True, DEADLINE
+      self.reason = DEADLINE
       print('Time limit reached: stopping with a checkpoint.', flush=True)
-    return self._requested
+    return self.reason is not None
 
   def __enter__(self):
     if threading.current_thread() is threading.main_thread():
@@ -317,7 +316,7 @@ class GracefulStop:
       raise KeyboardInterrupt
     # After the deadline too, the first signal (e.g. a job's scheduler
     # ending it) lets the checkpoint finish.
-    self._signalled = self._requested = True
+    self._signalled = True
     self.reason = self.reason or signal.Signals(signum).name
     print(f'{signal.Signals(signum).name}: stopping after this update '
           '(again to interrupt now).', flush=True)
