@@ -31,6 +31,7 @@ from agents import fields
 from runners import cli
 from runners import config as config_lib
 from runners import marl_eval
+from runners import paper_plan
 
 os.environ.setdefault('MUJOCO_GL', 'egl')
 
@@ -50,8 +51,11 @@ class EvalArgs:
   """Agents (ravine: crossers); 0 for the training count."""
   episodes: int = fields.field(100, fields.COUNT)
   """Episodes per model and seed."""
-  seeds: tuple[int, ...] = fields.field((0,), fields.SEED)
-  """Environment (and action noise) seeds."""
+  seeds: tuple[int, ...] = fields.field((paper_plan.EVAL_SEED,), fields.SEED)
+  """Evaluation seeds: each seeds the copies' environments
+  (`copy_seeds`) and the action noise. The default is the published
+  figures' (`coop-paper`'s): the same seeds and `--envs` give the same
+  episodes, so a figure from the defaults compares with docs/results.md."""
   envs: int = fields.field(10, fields.COUNT)
   """Environment copies stepped together. The same seeds give the same
   episodes only with the same count: the networks' float32 outputs round

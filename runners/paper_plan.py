@@ -45,15 +45,15 @@ EPISODE_SECONDS = 40.0
 """Episode length of the three tasks (docs/tasks.md), for time estimates."""
 CONTROL_TIMESTEP = 0.05
 AGENT_STEPS_PER_SECOND = 6_400.0
-"""Estimated Ant steps per second of a run: the README's 1,600 env steps/s
-with 4 Ants (`hrl`, 2 actors, the 2-core AMD EPYC development machine);
-a cell with k Ants per copy is estimated at 6,400 / k env steps/s."""
+"""Estimated Ant steps per second of a run: 1,600 env steps/s with 4 Ants
+(`hrl`, 2 actors, the 2-core AMD EPYC development machine: corridor/hrl/n4/s0
+averaged 1,640 beside other work; docs/paper.md); a cell with k Ants per
+copy is estimated at 6,400 / k env steps/s."""
 POPULATIONS = (2, 3, 4, 5)
 """The columns of Table 2 (ravine: crossers)."""
 
 # The paper's figures: success rate and standard error in %, 5 models x 100
-# episodes (d-hrl-corl2024.tex Tables 1 and 2; DESIGN.md section 5 restates
-# the rates).
+# episodes (the CoRL 2024 paper's Tables 1 and 2).
 PAPER_TABLE1 = {
     ('transport', 'hrl'): (76.8, 5.3), ('transport', 'flat'): (0.0, 0.0),
     ('transport', 'no_memory'): (9.6, 3.2),
