@@ -1,12 +1,17 @@
 """Every CLI comes from its dataclass through tyro: nested configs as flat
 flags, command lines that parse back to the same arguments, range errors
 as one line, resume checks from field metadata, old flat configs."""
+import ast
 import dataclasses
+import inspect
 import json
+import math
 import os
+import re
 import shutil
 import subprocess
 import sys
+import textwrap
 
 import pytest
 
@@ -40,6 +45,29 @@ def _leaf_names(cls):
       yield from _leaf_names(field.type)
     else:
       yield field.name
+
+
+def _field_docs(cls):
+  """{field: its docstring} of `cls` and its nested config dataclasses,
+  read from the source (the string literal under each field), as tyro
+  reads them."""
+  body = ast.parse(textwrap.dedent(inspect.getsource(cls))).body[0].body
+  docs = {}
+  for node, after in zip(body, body[1:]):
+    if (isinstance(node, ast.AnnAssign) and isinstance(after, ast.Expr)
+        and isinstance(after.value, ast.Constant)
+        and isinstance(after.value.value, str)):
+      docs[node.target.id] = after.value.value
+  for field in dataclasses.fields(cls):
+    if dataclasses.is_dataclass(field.type):
+      docs.update(_field_docs(field.type))
+  return docs
+
+
+def _letters(text):
+  """Only letters and digits: the help's boxes, wrapping and markup
+  (and a number wrapped at its comma) fall away."""
+  return re.sub(r'[^0-9A-Za-z]', '', text)
 
 
 def _old_state():
@@ -103,8 +131,13 @@ def test_help_shows_every_flag_with_its_docstring(cls, capsys):
     cli.parse(cls, ['--help'])
   assert exit_info.value.code == 0
   text = ' '.join(capsys.readouterr().out.split())
+  docs = _field_docs(cls)
   for name in _leaf_names(cls):
     assert fields.flag(name) in text, name
+    # Every flag has a docstring, and the help shows its first sentence.
+    assert docs.get(name, '').strip(), f'{name} has no docstring'
+    first = docs[name].strip().split('. ')[0]
+    assert _letters(first) in _letters(text), (name, first)
   if cls is config_lib.TrainArgs:
     assert '--learning-rate FLOAT' in text and 'Adam step size' in text
     assert '--keep-best, --no-keep-best' in text
@@ -168,7 +201,8 @@ def test_resumable_fields_are_marked_in_their_metadata():
           **change))
 
 
-def test_an_old_flat_config_loads_resumes_and_evaluates(tmp_path):
+def test_an_old_flat_config_loads_passes_the_resume_check_and_plays(
+    tmp_path):
   state = _old_state()
   assert 'hierarchy' not in state['args']  # The flat form.
   args = config_lib.TrainArgs.from_dict(state['args'])
@@ -193,6 +227,10 @@ def test_an_old_flat_config_loads_resumes_and_evaluates(tmp_path):
       run, evaluate.EvalArgs(checkpoint=(run,), n_agents=2))
   assert spec.n_agents == 2 and config == args.hierarchy
   assert set(models) == {'ant'}
+  out = evaluate.evaluate(evaluate.EvalArgs(
+      checkpoint=(run,), n_agents=2, episodes=1, envs=1, time_limit=1.0))
+  assert out['models'][0]['update'] == 659
+  assert math.isfinite(out['return']) and out['episodes'] == 1
 
 
 def test_the_clis_check_their_flags_without_jax_or_mujoco():

@@ -119,10 +119,10 @@ def test_unreachable_address_is_one_line(tmp_path, capsys):
     train.main(['--ray-address', f'127.0.0.1:{_free_port()}', '--logdir',
                 str(tmp_path / 'run'), '--total-steps', '1'])
   assert stop.value.code == 2
-  message = capsys.readouterr().err.strip().splitlines()[-1]
-  assert message.startswith('coop-train: error: --ray-address 127.0.0.1:')
-  assert 'no Ray cluster answers there' in message
-  assert '\n' not in message
+  lines = capsys.readouterr().err.strip().splitlines()
+  assert len(lines) == 1, lines
+  assert lines[0].startswith('coop-train: error: --ray-address 127.0.0.1:')
+  assert 'no Ray cluster answers there' in lines[0]
   assert issubclass(actor_pool.ClusterUnreachable, ConnectionError)
 
 

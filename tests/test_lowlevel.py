@@ -213,7 +213,11 @@ def test_controller_acts_in_bounds_single_and_batched_agree(controller):
              for k in observations[0]}
   np.testing.assert_allclose(controller.batch(stacked), single, rtol=1e-5,
                              atol=1e-6)
-  np.testing.assert_array_equal(controller(observations[0]), single[0])
+  # One agent's dict goes through the same flattening as `act`'s rows.
+  np.testing.assert_array_equal(
+      controller(observations[0]),
+      controller.act(obs_lib.flatten(observations[0],
+                                     controller.observation_keys)[None])[0])
   with pytest.raises(dataclasses.FrozenInstanceError):
     controller.paradigm = 'velocity'
 
@@ -344,7 +348,13 @@ def test_command_wrapper_feeds_heading_frame_commands(controller):
                                 recorder, command_period=0.5)
   env.reset()
   command = np.array([[2.0, -1.0], [9.0, 0.5]])  # Agent 1's x is clipped.
+  start = env._frames()  # pylint: disable=protected-access
+  clipped = np.array([[2.0, -1.0], [3.0, 0.5]])
+  target = start.position[:, :2] + np.stack(  # Heading frame -> world.
+      [start.cos * clipped[:, 0] - start.sin * clipped[:, 1],
+       start.sin * clipped[:, 0] + start.cos * clipped[:, 1]], axis=1)
   env.step(command)
+  np.testing.assert_allclose(env.world_commands, target, atol=1e-9)
   fed = recorder.inputs
   assert len(fed) == 10
   # At issue time the offset to the world target is the command itself...
@@ -356,6 +366,8 @@ def test_command_wrapper_feeds_heading_frame_commands(controller):
       frames.to_heading_frame(env.world_commands),
       _unflatten(controller, env.controller_input())['command/target'],
       rtol=1e-6)
+  # The agents moved, so the offset they were fed changed with them.
+  assert not np.allclose(fed[-1]['command/target'], fed[0]['command/target'])
   assert fed[0]['proprio/joints_pos'].shape == (2, 8)
 
 

@@ -60,8 +60,9 @@ def test_transport_cylinder_needs_several_ants():
   moved = {n: np.mean([_pushed(n, seed) for seed in (0, 1)])
            for n in (1, 2, 4)}
   assert moved[1] < 0.3, moved
-  assert moved[2] < 0.7, moved
-  assert moved[4] > 0.6 and moved[4] > 1.5 * moved[2], moved
+  assert moved[1] < moved[2] < 0.7, moved
+  # Seeds 0 and 1 when written: 0.11, 0.30 and 1.19 m on average.
+  assert moved[4] > 0.6 and moved[4] > 2 * moved[2], moved
 
 
 def test_slit_passes_one_ant_and_blocks_two_abreast():

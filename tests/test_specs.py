@@ -169,18 +169,36 @@ def test_global_state_has_fixed_size():
   assert env.task.global_state(env.physics).shape == state.shape
 
 
-def test_constraint_memory_is_sized_for_many_agents():
-  """16 ants in a heap would overflow MuJoCo's default arena memory."""
+def test_sixteen_ants_in_a_pile_fit_the_constraint_memory():
+  """The arena is sized per agent (4 MiB + `memory_mb_per_agent` each) and
+  holds a real pile: 16 Ants dropped onto each other touch each other
+  through many contacts, without MuJoCo's overflow warnings, with the peak
+  use below the arena."""
   import mujoco  # pylint: disable=g-import-not-at-top
   env = coop_suite.load("transport", 16, seed=0)
   env.reset()
+  physics = env.physics
+  model, data = physics.model.ptr, physics.data.ptr
+  assert model.narena == (4 + 16) * 2**20  # 1 MiB per agent by default.
+  for i, walker in enumerate(env.task.walkers):  # A tower over 2 x 2 spots.
+    walker.set_pose(physics, position=[0.15 * (i % 2), 0.15 * (i // 2 % 2),
+                                       0.5 + 0.45 * i])
   rng = np.random.RandomState(0)
-  for _ in range(40):
+  root = model.body_rootid
+  peak_use = peak_touching = 0
+  for _ in range(80):
     env.step(rng.uniform(-1, 1, (16, 8)))
-  warnings = env.physics.data.warning
+    peak_use = max(peak_use, data.maxuse_arena)
+    bodies = [root[model.geom_bodyid[data.contact.geom1[:data.ncon]]],
+              root[model.geom_bodyid[data.contact.geom2[:data.ncon]]]]
+    peak_touching = max(peak_touching, int(np.sum(
+        (bodies[0] != bodies[1]) & (bodies[0] != 0) & (bodies[1] != 0))))
+  assert peak_touching >= 30  # A pile formed (65 when written).
+  warnings = data.warning
   assert warnings[mujoco.mjtWarning.mjWARN_CNSTRFULL].number == 0
   assert warnings[mujoco.mjtWarning.mjWARN_CONTACTFULL].number == 0
   assert not env.physics_diverged
+  assert 0 < peak_use < model.narena
 
 
 def _episode_observations(env, steps=4):

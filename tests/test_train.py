@@ -85,15 +85,26 @@ def _rows(logdir):
     return list(csv.DictReader(f))
 
 
-def _learner_params(checkpoint, species):
-  """(initial params, checkpointed params) of one species."""
+def _fresh_learner(checkpoint, species):
+  """A newly built learner of `species` with the checkpoint's settings."""
   state = checkpoints.read_state(checkpoint)
   config = hierarchy_config.HierarchyConfig(**state['agent_config'])
   saved = next(s for s in state['species'] if s['name'] == species)
   builder = hierarchy_builder.HierarchyBuilder(config, saved['species_id'])
-  learner = builder.make_learner(builder.make_networks(
+  return builder.make_learner(builder.make_networks(
       saved['observation_size'], saved['action_size'],
       saved['global_state_size']))
+
+
+def _restored_learner(checkpoint, species='ant'):
+  learner = _fresh_learner(checkpoint, species)
+  learner.restore(checkpoints.saved_learner(checkpoint, species))
+  return learner
+
+
+def _learner_params(checkpoint, species):
+  """(initial params, checkpointed params) of one species."""
+  learner = _fresh_learner(checkpoint, species)
   initial = jax.device_get(learner.get_variables(['params'])[0])
   learner.restore(checkpoints.saved_learner(checkpoint, species))
   return initial, jax.device_get(learner.get_variables(['params'])[0])
@@ -167,6 +178,12 @@ def test_checkpoints_keep_the_newest_and_resume_continues(controller, hrl_run,
   state = checkpoints.read_state(kept[-1])
   assert state['episodes'] > first['episodes']
   assert state['args']['total_steps'] == 5 * STEPS
+  # The learner went on from its checkpoint, not afresh: 5 updates of 4
+  # commands x 4 rows (2 copies x 2 agents) in its counter and statistics
+  # (a fresh start at update 2 would hold 3 and 3 x 16).
+  learner = _restored_learner(kept[-1])
+  assert int(learner.state.update) == 5
+  assert float(learner.state.value_normalizer.count) == 5 * 4 * 4
   # The run's lower layer travels with it.
   assert sorted(os.listdir(os.path.join(logdir, 'controller'))) == sorted(
       controller_lib.FILES)
@@ -292,15 +309,7 @@ def test_the_stability_figures_are_logged_and_checkpointed(hrl_run):
   assert all(0 < float(r['learner/ant/learning_rate']) <= 1e-2 for r in rows)
   # The value statistics travel in the checkpoint: 2 updates of 4
   # commands x 4 rows (2 copies x 2 agents).
-  checkpoint = checkpoints.resolve(hrl_run)
-  state = checkpoints.read_state(checkpoint)
-  config = hierarchy_config.HierarchyConfig(**state['agent_config'])
-  saved = state['species'][0]
-  builder = hierarchy_builder.HierarchyBuilder(config, saved['species_id'])
-  learner = builder.make_learner(builder.make_networks(
-      saved['observation_size'], saved['action_size'],
-      saved['global_state_size']))
-  learner.restore(checkpoints.saved_learner(checkpoint, 'ant'))
+  learner = _restored_learner(checkpoints.resolve(hrl_run))
   assert float(learner.state.value_normalizer.count) == 2 * 4 * 4
   assert int(learner.state.update) == 2
 
