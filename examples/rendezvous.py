@@ -5,7 +5,7 @@ a target zone and succeed when all of them stand inside it at once. It
 uses only `CoopTask`'s hooks, written in numpy (the suite's own tasks put
 the same hooks' arithmetic in one compiled `measure` kernel for speed; that
 is an optimisation, not a requirement). Register it, then load it like the
-shipped tasks:
+shipped tasks (from the repository's root, where `examples` imports):
 
     import coop_suite
     from examples import rendezvous
@@ -13,8 +13,9 @@ shipped tasks:
     env = coop_suite.load("rendezvous", 3, seed=0)
 
 `tests/test_extending.py` checks that it loads, steps on both of the
-suite's step paths with the same numbers, succeeds when the Ants are in
-the zone, and trains in-process with `coop-train --actors 0`.
+suite's step paths with the same numbers, succeeds exactly when every Ant
+is in the zone, and trains in this process (`learner_loop.train` with
+`actors=0`).
 """
 
 import dataclasses
@@ -39,7 +40,8 @@ class RendezvousConfig(base.TaskConfig):
   start_distance: float = 4.0
   """The ring's radius around the zone (m)."""
   agent_target_scale: float = 5.0
-  """Coefficient of 5 / (1 + d(agent, zone centre)), paid every step."""
+  """The shaping term `agent_target_scale / (1 + d(agent, zone centre))`,
+  paid every step."""
   success_bonus: float = 100.0
   """Paid to every agent on the step the team succeeds."""
 
@@ -102,8 +104,10 @@ class Rendezvous(base.CoopTask):
 def register(name="rendezvous", default_agents=3):
   """Adds the task to `coop_suite.tasks.TASKS` in this process.
 
-  Ray's actor processes import `coop_suite` afresh, so for `coop-train`
-  with actors put the same entry in `coop_suite/tasks/__init__.py`
-  (docs/extending.md); `--actors 0` trains in this process.
+  Only code in this process sees it (e.g. `runners.learner_loop.train` or
+  `runners.train.main([...])` with `actors=0`, after this call). The
+  `coop-train` command, and Ray's actor processes, import `coop_suite`
+  afresh: for them the entry goes in `coop_suite/tasks/__init__.py`
+  (docs/extending.md).
   """
   tasks.TASKS[name] = (Rendezvous, RendezvousConfig, default_agents)

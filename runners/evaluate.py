@@ -54,8 +54,9 @@ class EvalArgs:
   seeds: tuple[int, ...] = fields.field((paper_plan.EVAL_SEED,), fields.SEED)
   """Evaluation seeds: each seeds the copies' environments
   (`copy_seeds`) and the action noise. The default is the published
-  figures' (`coop-paper`'s): the same seeds and `--envs` give the same
-  episodes, so a figure from the defaults compares with docs/results.md."""
+  figures' (`coop-paper`'s): the same seeds and `--envs` start the same
+  episodes (which play alike on the same platform), so a figure from the
+  defaults compares with docs/results.md."""
   envs: int = fields.field(10, fields.COUNT)
   """Environment copies stepped together. The same seeds give the same
   episodes only with the same count: the networks' float32 outputs round

@@ -20,16 +20,19 @@ SMALL = dict(upper_layer_sizes=(16,), middle_layer_size=H, head_sizes=(8,),
              critic_sizes=(8,), flat_sizes=(16,), num_minibatches=2)
 
 
+def _config(agent):
+  return hierarchy_config.HierarchyConfig(agent=agent, **SMALL)
+
+
 def _action_dim(agent):
-  # Joint actions or the 2-D command.
-  return 8 if agent in ('flat', 'lowlevel') else 2
+  # The 2-D command, or joint actions (a variant without the lower layer).
+  return 2 if _config(agent).uses_commands else 8
 
 
 @functools.lru_cache(maxsize=None)
 def _setup(agent):
   """Builder, networks and learner per variant, shared so each compiles once."""
-  builder = hierarchy_builder.HierarchyBuilder(
-      hierarchy_config.HierarchyConfig(agent=agent, **SMALL))
+  builder = hierarchy_builder.HierarchyBuilder(_config(agent))
   networks = builder.make_networks(OBS_DIM, _action_dim(agent), GLOBAL_DIM)
   return builder, networks, builder.make_learner(networks)
 
@@ -44,7 +47,8 @@ def _random_batch(agent, seed=0):
       reward=f32(T, B), discount=discount,
       reset=rng.uniform(size=(T + 1, B)) < 0.3,
       initial_carry=f32(B, _setup(agent)[1].carry_size),
-      global_state=f32(T + 1, B, GLOBAL_DIM) if agent == 'mappo' else None,
+      global_state=(f32(T + 1, B, GLOBAL_DIM)
+                    if _config(agent).uses_global_state else None),
       truncation=((rng.uniform(size=(T, B)) > 0.9) * discount).astype(
           np.float32))
 
@@ -66,7 +70,7 @@ def test_updates_move_every_parameter_and_stay_finite(agent):
   assert int(update_after) == int(update) + 2
   assert float(normalizer.count) >= 2 * T * B
   assert float(gs_normalizer.count) == (
-      float(normalizer.count) if agent == 'mappo' else 0.0)
+      float(normalizer.count) if _config(agent).uses_global_state else 0.0)
 
 
 @pytest.mark.parametrize('agent', ['hrl', 'mappo'])

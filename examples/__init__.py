@@ -1,0 +1,1 @@
+"""Worked examples of extending coop-suite (docs/extending.md)."""
