@@ -5,7 +5,8 @@ no simulation) and `--baselines` (the difficulty references), and writes
 markdown: per table, our success rate +- standard error over all models x
 episodes, the spread between models (standard error of the per-model
 rates), how many of the declared models are in, the paper's figure and the
-greedy and oracle references beside; with `--figures`, the learning
+greedy and oracle references beside; the curriculum stages' own
+evaluations in a table of their own; with `--figures`, the learning
 curves of the committed cells (their metrics.csv) as PNGs, linked; then
 each cell's command.
 """
@@ -137,6 +138,13 @@ def _models(plan, experiment, task, agent, n_agents):
   """The joint (final) cells of one trained configuration, all seeds."""
   return [c for c in plan if (c.experiment, c.task, c.agent, c.n_agents) ==
           (experiment, task, agent, n_agents) and not c.stage]
+
+
+def _stage_configurations(plan) -> list[tuple[str, str, str, str, int]]:
+  """(experiment, task, agent, stage, n_agents) of every curriculum stage
+  in the plan, in plan order, each once."""
+  return list(dict.fromkeys((c.experiment, c.task, c.agent, c.stage,
+                             c.n_agents) for c in plan if c.stage))
 
 
 def _scaling_models(plan) -> dict[int, list[paper_plan.Cell]]:
@@ -278,6 +286,26 @@ def report(args: paper.PaperArgs, plan=None) -> str:
                            *refs(task, n)]))
     lines.append('')
   lines += _curves_tables(plan, args, columns, refs)
+  stages = [(key, [c for c in plan if (c.experiment, c.task, c.agent,
+                                       c.stage, c.n_agents) == key])
+            for key in _stage_configurations(plan)]
+  stages = [(key, cells) for key, cells in stages
+            if any(paper.is_done(c, args) for c in cells)]
+  if stages:
+    lines += ['### Curriculum stages', '',
+              'Each stage model on its own stage\'s task (transport\'s push '
+              'stage: the task without the agent-target term; the '
+              'ravine\'s pushers stage: the stone in front of the crossers\' '
+              'markers; its crossers stage: no pushers), final checkpoints. '
+              'The joint runs above start from them; the paper reports no '
+              'stage figures.', '',
+              *_header(['task', 'variant', 'stage', 'population',
+                        *columns])]
+    for (_, task, agent, stage, n), cells in stages:
+      lines.append(_row([task, paper_plan.VARIANT_NAMES[agent], stage,
+                         f'{n} {baselines.population_unit(task)}',
+                         *_ours(summarize(cells, n, args))]))
+    lines.append('')
   drawn = figures(args, plan, args.figures) if args.figures else []
   if drawn:
     # Links relative to the page the tables go into.

@@ -373,6 +373,11 @@ def test_report_rebuilds_the_tables_from_committed_results(tmp_path, capsys,
   assert ('| transport | 2 Ants | 12.5% +- 12.5 | +- 12.5 | 2/5 | '
           '20M + ?/20M + 3M | 12.8% +- 5.6 | 12% +- 3 | 12% +- 3 |') in text
   assert '| corridor (4 Ants) | HRL | not run |  | 0/5 |' in text
+  # The committed push stage in the stages' table, at its own task; stages
+  # with no committed model are left out.
+  assert ('| transport | HRL | push | 4 Ants | 0.0% +- 0.0 |  | 1/5 | 3M |'
+          in text)
+  assert '| ravine | HRL | pushers |' not in text
   assert '| 4 | 37.5% +- 18.3 | +- 12.5 | 2/3 |' in text  # Fig. 4a.
   assert 'coop-train --seed 1 --actors 0 --total-steps 12000000 --logdir' in text
   assert 'coop-train --seed 1 --actors 0 --total-steps 3000000 --logdir' in text
