@@ -296,7 +296,10 @@ def report(args: paper.PaperArgs, plan=None) -> str:
               'Each stage model on its own stage\'s task (transport\'s push '
               'stage: the task without the agent-target term; the '
               'ravine\'s pushers stage: the stone in front of the crossers\' '
-              'markers; its crossers stage: no pushers), final checkpoints. '
+              'markers; its crossers stage: no pushers and the stone '
+              'anywhere, where the paper\'s reward teaches walking to the '
+              'edge without falling in, so crossings are rare), final '
+              'checkpoints. '
               'The joint runs above start from them; the paper reports no '
               'stage figures.', '',
               *_header(['task', 'variant', 'stage', 'population',
