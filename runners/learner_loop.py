@@ -21,8 +21,9 @@ One update (number u):
 
 The run lasts ceil(total_steps / nominal steps per update) updates,
 nominal = actors x envs_per_actor x sequence_length x low-level steps per
-command; a resumed run collects what is left of total_steps at its own
-batch size. Ctrl-C / SIGTERM stop after the current update with a
+command, and more while it has taken fewer than total_steps (an episode
+that ends inside a command period takes fewer steps than nominal); a
+resumed run collects what is left of total_steps at its own batch size. Ctrl-C / SIGTERM stop after the current update with a
 checkpoint; `--resume` continues from the newest one.
 """
 import dataclasses
@@ -267,6 +268,13 @@ def _train(args, checkpoint, on_update, deadline):
         counters['wall_time'] += seconds
         counters['restarts'] = restarts_at_start + pool.restarts
         learning = False
+        if (counters['update'] == updates
+            and counters['env_steps'] < args.total_steps):
+          # Episodes that ended inside a command period (a crosser falling
+          # into the ravine) took fewer steps than nominal: go on until the
+          # budget is spent, as a resumed run would.
+          updates += math.ceil((args.total_steps - counters['env_steps'])
+                               / per_update)
         window.extend(episodes)
         row = {'update': counters['update'],
                'env_steps': counters['env_steps'],

@@ -189,6 +189,21 @@ def test_checkpoints_keep_the_newest_and_resume_continues(controller, hrl_run,
       controller_lib.FILES)
 
 
+def test_a_run_spends_its_budget_when_episodes_end_inside_a_command(
+    controller, tmp_path):
+  # Episodes of 0.75 s end after 15 control steps, inside a command of 2:
+  # that command takes 1 step, so 2 updates take fewer than the nominal 32
+  # and the run goes on (a run that stopped short of its budget was taken
+  # by coop-paper for an unfinished one).
+  logdir = str(tmp_path / 'short')
+  summary = learner_loop.train(_args(logdir, controller, time_limit=0.75,
+                                     total_steps=2 * STEPS))
+  steps = [int(r['env_steps']) for r in _rows(logdir)]
+  assert steps[1] < 2 * STEPS <= steps[-1], steps
+  assert summary['update'] == len(steps) == 3
+  assert checkpoints.read_state(checkpoints.resolve(logdir))['update'] == 3
+
+
 def test_best_checkpoint_holds_the_best_full_window(controller, tmp_path,
                                                    capsys):
   # Episodes of 0.8 s are 2 updates: with a window of 2 episodes it is
