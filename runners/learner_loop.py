@@ -23,7 +23,8 @@ The run lasts ceil(total_steps / nominal steps per update) updates,
 nominal = actors x envs_per_actor x sequence_length x low-level steps per
 command, and more while it has taken fewer than total_steps (an episode
 that ends inside a command period takes fewer steps than nominal); a
-resumed run collects what is left of total_steps at its own batch size. Ctrl-C / SIGTERM stop after the current update with a
+resumed run collects what is left of total_steps at its own batch
+size. Ctrl-C / SIGTERM stop after the current update with a
 checkpoint; `--resume` continues from the newest one.
 """
 import dataclasses
@@ -273,8 +274,10 @@ def _train(args, checkpoint, on_update, deadline):
           # Episodes that ended inside a command period (a crosser falling
           # into the ravine) took fewer steps than nominal: go on until the
           # budget is spent, as a resumed run would.
-          updates += math.ceil((args.total_steps - counters['env_steps'])
-                               / per_update)
+          more = math.ceil((args.total_steps - counters['env_steps'])
+                           / per_update)
+          updates += more
+          progress.extend(more * per_update)
         window.extend(episodes)
         row = {'update': counters['update'],
                'env_steps': counters['env_steps'],

@@ -116,6 +116,11 @@ class Progress:
       print(f'update {row["update"]} env_steps {row["env_steps"]} '
             + ' '.join(f'{k} {v}' for k, v in postfix.items()), flush=True)
 
+  def extend(self, steps: int) -> None:
+    """Raises the bar's total by `steps` (a run that goes on)."""
+    self._bar.total += steps
+    self._bar.refresh()
+
   def close(self) -> None:
     self._bar.close()
 

@@ -305,9 +305,12 @@ def report(args: paper.PaperArgs, plan=None) -> str:
               *_header(['task', 'variant', 'stage', 'population',
                         *columns])]
     for (_, task, agent, stage, n), cells in stages:
+      population = f'{n} {baselines.population_unit(task)}'
+      if (task, stage) == ('ravine', 'pushers'):  # No crossers: markers.
+        pushers = paper.train_args(cells[0], args).n_pushers
+        population = f'{pushers} pushers ({n} markers)'
       lines.append(_row([task, paper_plan.VARIANT_NAMES[agent], stage,
-                         f'{n} {baselines.population_unit(task)}',
-                         *_ours(summarize(cells, n, args))]))
+                         population, *_ours(summarize(cells, n, args))]))
     lines.append('')
   drawn = figures(args, plan, args.figures) if args.figures else []
   if drawn:

@@ -418,6 +418,12 @@ def test_report_rebuilds_the_tables_from_committed_results(tmp_path, capsys,
   results = [paper.results_directory(c, args) for c in hrl[:2]]
   assert drawn['table1_transport.png']['HRL'] == [
       f'{os.path.join(args.results, push)}+{results[0]}', results[1]]
+  # The ravine's pushers stage acts with pushers only (its crossers are
+  # markers), and says so.
+  pushers = next(c for c in paper_plan.PLAN if c.stage == 'pushers')
+  _commit(pushers, args, {2: [1, 1, 1, 0]}, env_steps=10_000_000)
+  assert ('| ravine | HRL | pushers | 2 pushers (2 markers) | 75.0% +- 25.0 '
+          '|  | 1/5 | 10M |') in paper_report.report(args)
 
 
 def test_eval_json_follows_marl_eval_layout(tiny_run, tmp_path, capsys):
