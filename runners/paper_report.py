@@ -140,13 +140,6 @@ def _models(plan, experiment, task, agent, n_agents):
           (experiment, task, agent, n_agents) and not c.stage]
 
 
-def _stage_configurations(plan) -> list[tuple[str, str, str, str, int]]:
-  """(experiment, task, agent, stage, n_agents) of every curriculum stage
-  in the plan, in plan order, each once."""
-  return list(dict.fromkeys((c.experiment, c.task, c.agent, c.stage,
-                             c.n_agents) for c in plan if c.stage))
-
-
 def _scaling_models(plan) -> dict[int, list[paper_plan.Cell]]:
   """Fig. 4a's cells per training population (4 Ants: Table 1's first
   `SCALING_SEEDS` models), populations without cells left out."""
@@ -286,10 +279,12 @@ def report(args: paper.PaperArgs, plan=None) -> str:
                            *refs(task, n)]))
     lines.append('')
   lines += _curves_tables(plan, args, columns, refs)
-  stages = [(key, [c for c in plan if (c.experiment, c.task, c.agent,
-                                       c.stage, c.n_agents) == key])
-            for key in _stage_configurations(plan)]
-  stages = [(key, cells) for key, cells in stages
+  stages = {}  # (experiment, task, agent, stage, n_agents) -> its cells.
+  for c in plan:
+    if c.stage:
+      stages.setdefault((c.experiment, c.task, c.agent, c.stage,
+                         c.n_agents), []).append(c)
+  stages = [(key, cells) for key, cells in stages.items()
             if any(paper.is_done(c, args) for c in cells)]
   if stages:
     lines += ['### Curriculum stages', '',
