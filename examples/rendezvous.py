@@ -66,11 +66,14 @@ class Rendezvous(base.CoopTask):
     return self.per_state("distances", lambda: rewards.planar_distance(
         self.frames(physics).position[:, :2], self._arena.target_position))
 
+  def _inside(self, physics):
+    """[n] whether each torso is within the zone."""
+    return self._distances(physics) <= self._config.zone_radius
+
   def _exteroception(self, physics, frames):
     zone = np.tile(self._arena.target_position, (self.n_agents, 1))
-    inside = self._distances(physics) <= self._config.zone_radius
     return {"zone": frames.to_heading_frame(zone),
-            "inside": inside[:, None].astype(np.float64)}
+            "inside": self._inside(physics)[:, None].astype(np.float64)}
 
   def _initialize_layout(self, physics, random_state):
     self._arena.set_target(physics, [0.0, 0.0])
@@ -81,8 +84,7 @@ class Rendezvous(base.CoopTask):
       layouts.place(walker, physics, xy, yaw, random_state)
 
   def _update_status(self, physics):
-    self._success = bool(np.all(
-        self._distances(physics) <= self._config.zone_radius))
+    self._success = bool(np.all(self._inside(physics)))
 
   def _reward_terms(self, physics):
     cfg = self._config
@@ -94,8 +96,7 @@ class Rendezvous(base.CoopTask):
     }
 
   def _progress(self, physics):
-    return {"inside": int(np.sum(
-        self._distances(physics) <= self._config.zone_radius))}
+    return {"inside": int(np.sum(self._inside(physics)))}
 
   def _task_state(self, physics):
     return np.asarray(self._arena.target_position, np.float64)

@@ -218,10 +218,13 @@ def _train(args, checkpoint, on_update, deadline):
       dataclasses.asdict(config)), 'species': [s.to_dict() for s in layout]}
   per_update = (args.num_actors * args.envs_per_actor
                    * config.sequence_length * per_action)
-  # What is left of the budget, at today's batch size (a resumed run may
-  # collect more or less per update than before).
-  updates = counters['update'] + math.ceil(
-      max(0, args.total_steps - counters['env_steps']) / per_update)
+
+  def updates_to_go():
+    """Updates for what is left of the budget, at today's batch size (a
+    resumed run may collect more or less per update than before)."""
+    return math.ceil(max(0, args.total_steps - counters['env_steps'])
+                     / per_update)
+  updates = counters['update'] + updates_to_go()
   n_agents = sum(len(s.agents) for s in layout)
 
   log = run_dir.MetricsLog(
@@ -269,13 +272,11 @@ def _train(args, checkpoint, on_update, deadline):
         counters['wall_time'] += seconds
         counters['restarts'] = restarts_at_start + pool.restarts
         learning = False
-        if (counters['update'] == updates
-            and counters['env_steps'] < args.total_steps):
+        more = updates_to_go() if counters['update'] == updates else 0
+        if more:
           # Episodes that ended inside a command period (a crosser falling
           # into the ravine) took fewer steps than nominal: go on until the
           # budget is spent, as a resumed run would.
-          more = math.ceil((args.total_steps - counters['env_steps'])
-                           / per_update)
           updates += more
           progress.extend(more * per_update)
         window.extend(episodes)
