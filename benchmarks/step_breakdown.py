@@ -4,16 +4,17 @@
     python benchmarks/step_breakdown.py --lockstep [--copies 16]
 
 Runs the real `env.step` with a timer around each piece it calls (action
-validation, the task's `before_step`, the physics substeps, the status
-update, the reward, the observation) and prints each piece's share of the
-step, so that the figures do not depend on how busy the shared machine is.
+validation, the controls, which the fast path writes from compiled code,
+the physics substeps, the status update, the reward, the observation) and
+prints each piece's share of the step, so that the figures do not depend on
+how busy the shared machine is.
 The pieces are timed where they run, with the caches as the physics leaves
 them; timed alone and warm they would look two to three times cheaper.
 
 `--lockstep` does the same for what an actor runs in training: `--copies`
 copies stepped in lockstep by `EnvBatch` with the shipped lower layer and
-random commands (the lower layer's input and call, each copy's physics
-phase and outcome phase, `docs/performance.md`). Run it pinned to one core
+random commands (the lower layer's input and call, the physics phase of
+all copies at once, and each copy's outcome phase, `docs/performance.md`). Run it pinned to one core
 with the actors' settings, e.g. `JAX_PLATFORMS=cpu OMP_NUM_THREADS=1
 XLA_FLAGS=--xla_cpu_multi_thread_eigen=false taskset -c 1 python ...`.
 """
@@ -54,22 +55,21 @@ def main():
   if args.lockstep:
     lockstep(args)
     return
+  from coop_suite.fast import stepping  # pylint: disable=g-import-not-at-top
   env = coop_suite.load(args.task, args.n_agents, seed=0, time_limit=1e9)
   env.reset()
   task = env.task
   totals = collections.defaultdict(float)
+  _time_physics(stepping, totals)
   # pylint: disable=protected-access
   env.validate_action = _timed(env.validate_action, totals,
                                "action validation")
-  task.before_step = _timed(task.before_step, totals, "before_step (controls)")
+  task.before_step = _timed(task.before_step, totals, "controls")
   task.after_step = _timed(task.after_step, totals, "status (after_step)")
   task.get_reward = _timed(task.get_reward, totals, "reward")
   updater = env._observation_updater
   updater.get_observation = _timed(updater.get_observation, totals,
                                    "observation")
-  runner = env._stepper.substeps if env._stepper is not None else None
-  if runner is not None:
-    runner.step = _timed(runner.step, totals, "physics substeps")
   # pylint: enable=protected-access
   actions = np.random.RandomState(0).uniform(-1, 1,
                                              (args.steps, env.n_agents, 8))
@@ -86,6 +86,16 @@ def main():
     print(f"  {name:24s} {seconds / total:5.2f}")
   rest = 1 - sum(totals.values()) / total
   print(f"  {'rest (composer, timers)':24s} {rest:5.2f}")
+
+
+def _time_physics(stepping, totals):
+  """Times MuJoCo's substeps under "physics substeps", wherever they run:
+  after the compiled controls (`FusedStep.compiled_substeps`, with its
+  ~1 us of bookkeeping) or in the Python runner."""
+  for owner, name in ((stepping.FusedStep, "compiled_substeps"),
+                      (stepping.SubstepRunner, "step")):
+    setattr(owner, name, _timed(getattr(owner, name), totals,
+                                "physics substeps"))
 
 
 def lockstep_batch(task, n_agents, copies):
@@ -110,16 +120,16 @@ def lockstep(args):
   batch = lockstep_batch(args.task, args.n_agents, args.copies)
   (species,) = batch.species  # Every agent commanded alike.
   totals = collections.defaultdict(float)
-  # The substeps and the (frozen) controller by class, the rest per copy.
-  stepping.SubstepRunner.step = _timed(stepping.SubstepRunner.step, totals,
-                                       "physics substeps")
+  # The substeps and the (frozen) controller by class, the physics phase of
+  # all copies at once, the rest per copy.
+  _time_physics(stepping, totals)
   controller = type(batch.envs[0].controller)
   controller.act = _timed(controller.act, totals, "lower-layer call")
+  physics = batch._physics  # pylint: disable=protected-access
+  physics.step_physics = _timed(physics.step_physics, totals, "physics phase")
   for copy in batch.envs:
     copy.controller_input = _timed(copy.controller_input, totals,
                                    "lower-layer input")
-    copy.env.step_physics = _timed(copy.env.step_physics, totals,
-                                   "physics phase")
     copy.env.step_outcome = _timed(copy.env.step_outcome, totals,
                                    "outcome phase")
   low_level = batch.envs[0].low_level_steps

@@ -31,7 +31,8 @@ These things differ from a plain `composer.Environment`, each for a reason:
 * `step` also comes in its two phases, `step_physics(action)` then
   `step_outcome(observe)`, for callers that step many copies in lockstep:
   every copy's physics, then every copy's outcome, which keeps each phase's
-  code in the processor's caches (docs/performance.md).
+  code in the processor's caches (docs/performance.md). `LockstepPhysics`
+  runs the physics phases of many copies with the Python of one.
 """
 
 from dm_control import composer
@@ -110,7 +111,8 @@ class CoopEnvironment(composer.Environment):
     self._pending_action = None
     timestep = super().reset()
     # Hooks, observables and the physics are fixed once an episode starts.
-    self._stepper = fast.FusedStep.make(self) if self._fast_path else None
+    self._stepper = (fast.FusedStep.make(self, self.action_bounds()[1:])
+                     if self._fast_path else None)
     return timestep
 
   def step(self, action, observe=True):
@@ -169,13 +171,9 @@ class CoopEnvironment(composer.Environment):
           discount=np.zeros((), np.float32))
     return timestep
 
-  def validate_action(self, action):
-    """Returns `action` as a float array [n_agents, 8] or raises.
-
-    Raises:
-      TypeError: if `action` is not a sequence of numeric arrays.
-      ValueError: wrong number of agents, wrong shape, or non-finite values.
-    """
+  def action_bounds(self):
+    """(shape [n_agents, 8], low [8], high [8]) of the actions: every agent
+    has the first agent's (the Ant's) spec."""
     if self._action_bounds is None:
       specs = self.action_spec()
       shape = specs[0].shape
@@ -183,7 +181,16 @@ class CoopEnvironment(composer.Environment):
           (len(specs),) + shape,
           np.broadcast_to(specs[0].minimum, shape).astype(np.float64),
           np.broadcast_to(specs[0].maximum, shape).astype(np.float64))
-    shape, low, high = self._action_bounds
+    return self._action_bounds
+
+  def validate_action(self, action):
+    """Returns `action` as a float array [n_agents, 8] or raises.
+
+    Raises:
+      TypeError: if `action` is not a sequence of numeric arrays.
+      ValueError: wrong number of agents, wrong shape, or non-finite values.
+    """
+    shape, low, high = self.action_bounds()
     if type(action) in (list, tuple):  # pylint: disable=unidiomatic-typecheck
       # The documented convention, one array per agent: stacked in one call
       # when that gives a float array of the right shape; anything else goes
@@ -242,6 +249,70 @@ class CoopEnvironment(composer.Environment):
 
 
 _KERNEL_DTYPES = (np.dtype(np.float32), np.dtype(np.float64))
+
+
+class LockstepPhysics:
+  """The physics phases of copies of one task, stepped together.
+
+  `step_physics(actions, active)` is `envs[e].step_physics(actions[k])` for
+  the k-th copy e of `active`, the same numbers, with the Python of one
+  physics phase (`fast.physics_phases`: every copy's controls in one
+  compiled call, each copy's substeps, every copy's warnings in one call)
+  where every one of them is on the fast path with compiled controls
+  (`fast.FusedStep.make`); otherwise, or where an action is not finite,
+  copy by copy (which raises the usual errors). An actor's copies stepped
+  in lockstep (`runners.rollout.EnvBatch`) skip composer's hooks and the
+  action checks per copy (docs/performance.md).
+  """
+
+  def __init__(self, envs):
+    """Args:
+      envs: the copies, any objects with `step_physics`; only
+        `CoopEnvironment`s are stepped together.
+    """
+    self._envs = list(envs)
+    self._steppers = None  # Those the table below was made for.
+    self._table = None  # (addresses [E, 3], low, high), or None: copy by copy.
+
+  def step_physics(self, actions, active=None):
+    """Steps the physics of copies `active` (indices; all if None) with
+    `actions` [len(active), n_agents, 8], row k for copy active[k]."""
+    envs = self._envs
+    chosen = envs if active is None else [envs[e] for e in active]
+    if len(actions) != len(chosen):
+      raise ValueError(f"{len(chosen)} copies step, {len(actions)} actions.")
+    steppers = [getattr(env, "_stepper", None) for env in chosen]
+    if self._steppers is None or len(steppers) != len(self._steppers) or any(
+        a is not b for a, b in zip(steppers, self._steppers)):
+      self._steppers, self._table = steppers, self._make_table(chosen)
+    clipped = None
+    if self._table is not None and not any(
+        env._reset_next_step for env in chosen):  # pylint: disable=protected-access
+      addresses, low, high = self._table
+      clipped = fast.physics_phases(steppers, addresses, actions, low, high)
+    if clipped is None:
+      for env, action in zip(chosen, actions):
+        env.step_physics(action)
+      return
+    for env, action in zip(chosen, clipped):
+      env._pending_action = action  # pylint: disable=protected-access
+
+  @staticmethod
+  def _make_table(chosen):
+    """What `fast.physics_phases` needs for `chosen`, or None if one of
+    them cannot be stepped by it (then all go copy by copy)."""
+    if not all(isinstance(env, CoopEnvironment) and env._stepper is not None  # pylint: disable=protected-access
+               and env._stepper.addresses is not None for env in chosen):  # pylint: disable=protected-access
+      return None
+    first = chosen[0]._stepper  # pylint: disable=protected-access
+    low, high = first.action_bounds
+    for env in chosen:
+      stepper = env._stepper  # pylint: disable=protected-access
+      if (not np.array_equal(stepper.action_bounds[0], low)
+          or not np.array_equal(stepper.action_bounds[1], high)):
+        return None
+    return (np.array([env._stepper.addresses for env in chosen], np.intp),  # pylint: disable=protected-access
+            low, high)
 
 
 def _rebuild(load_arguments):

@@ -64,6 +64,11 @@ class EnvBatch:
     self._global_state = global_state and config.uses_global_state
     self._dt = envs_lib.control_timestep(self.envs[0])
     self._controller = self.envs[0].controller if spec.uses_commands else None
+    from coop_suite import environment  # pylint: disable=g-import-not-at-top
+    # Every copy's physics phase in one call (a `CommandWrapper`'s
+    # `advance_physics` is its environment's `step_physics`).
+    self._physics = environment.LockstepPhysics(
+        env.env if spec.uses_commands else env for env in self.envs)
     if self._controller is not None:
       if any(env.controller is not self._controller for env in self.envs):
         raise ValueError('Copies stepped together share one controller.')
@@ -161,8 +166,7 @@ class EnvBatch:
     the same). Every low-level step goes in its two phases: all copies'
     physics, then all copies' outcomes (`CoopEnvironment.step_physics`)."""
     if self._controller is None:
-      for env, a in zip(self.envs, actions):
-        env.step_physics(a)
+      self._physics.step_physics(actions)
       return [env.step_outcome() for env in self.envs]
     for env, a in zip(self.envs, actions):
       env.begin(a)
@@ -171,12 +175,13 @@ class EnvBatch:
     while active:
       for e in active:
         self.envs[e].controller_input(out=self._inputs[e * n:(e + 1) * n])
-      joints = self._controller.act(self._inputs)
-      # `advance` in its two phases: each phase's code stays in the caches
-      # from one copy to the next (+6% in the one-core benchmark with 16
-      # copies, docs/performance.md).
-      for e in active:
-        self.envs[e].advance_physics(joints[e * n:(e + 1) * n])
+      joints = self._controller.act(self._inputs).reshape(self.num_envs, n,
+                                                          -1)
+      # `advance` in its two phases: every copy's physics with the Python of
+      # one, then each copy's outcome, whose code stays in the caches from
+      # one copy to the next (docs/performance.md).
+      self._physics.step_physics(
+          joints if len(active) == self.num_envs else joints[active], active)
       active = [e for e in active if not self.envs[e].advance_outcome()]
     return [env.end() for env in self.envs]
 

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import coop_suite
+from coop_suite import environment
 
 # Every task, the ravine in each of its stages; short episodes so that the
 # time limit's LAST step and the next reset are covered too.
@@ -95,3 +96,115 @@ def test_the_phases_refuse_to_run_out_of_order(fast_path):
   env.reset()
   with pytest.raises(RuntimeError, match="step_physics"):
     env.step_outcome()  # ...leaves nothing to end.
+
+
+def _copies(task, n_agents, options, fast_path=True, seeds=(5, 6, 7)):
+  envs = [coop_suite.load(task, n_agents, seed=s, time_limit=0.6,
+                          fast_path=fast_path, **options) for s in seeds]
+  for env in envs:
+    env.reset()
+  return envs
+
+
+@pytest.fixture
+def compiled_calls(monkeypatch):
+  """The number of copies whose controls each compiled call wrote."""
+  from coop_suite.fast import stepping  # pylint: disable=g-import-not-at-top
+  calls = []
+  kernel = stepping._write_controls  # pylint: disable=protected-access
+
+  def counted(addresses, *args):
+    calls.append(len(addresses))
+    return kernel(addresses, *args)
+  monkeypatch.setattr(stepping, "_write_controls", counted)
+  return calls
+
+
+@pytest.mark.parametrize("fast_path", [True, False])
+def test_copies_stepped_together_step_as_each_copy_alone(fast_path,
+                                                         compiled_calls):
+  """`LockstepPhysics` steps the physics of many copies in one compiled call
+  (the fast path) or copy by copy (plain composer): every timestep and the
+  episode metrics equal each copy stepped alone, with a copy left out of
+  some steps, through the time limit and the reset after it."""
+  for task, n_agents, options in _CASES:
+    together = _copies(task, n_agents, options, fast_path)
+    alone = _copies(task, n_agents, options, fast_path)
+    physics = environment.LockstepPhysics(together)
+    rng = np.random.RandomState(3)
+    compiled_calls.clear()
+    together_calls = []
+    for step in range(30):
+      active = [0, 2] if step % 3 == 1 else [0, 1, 2]
+      together_calls.append(len(active))
+      n = together[0].n_agents  # The ravine's pushers come on top.
+      actions = rng.uniform(-1.5, 1.5, (len(active), n, 8)).astype(
+          np.float32 if step % 2 else np.float64)
+      physics.step_physics(actions, active)
+      for e, action in zip(active, actions):
+        got, want = together[e].step_outcome(), alone[e].step(action)
+        _assert_identical(got, want, f"{task} {options} step {step} copy {e}")
+        if got.last():
+          _assert_identical(together[e].episode_metrics(),
+                            alone[e].episode_metrics(), f"{task} metrics")
+          _assert_identical(together[e].reset(), alone[e].reset(), task)
+    assert together[1].task.episode_metrics(together[1].physics)[
+        "control_steps"] > 0
+    if fast_path:  # Together in one call; alone, one call a step.
+      assert [c for c in compiled_calls if c > 1] == together_calls, task
+      assert compiled_calls.count(1) == sum(together_calls), task
+    else:
+      assert not compiled_calls
+
+
+def test_copies_stepped_together_keep_the_copy_by_copy_errors():
+  together = _copies("transport", 2, {})
+  physics = environment.LockstepPhysics(together)
+  actions = np.zeros((3, 2, 8))
+  actions[1, 1, 4] = np.nan
+  with pytest.raises(ValueError, match=r"agents \[1\] contain NaN"):
+    physics.step_physics(actions)
+  with pytest.raises(ValueError, match="2 actions"):
+    physics.step_physics(np.zeros((2, 2, 8)))
+  for env in together:  # A clean start, then one copy runs out of time.
+    env.reset()
+  together[2].physics.data.time = 0.6
+  physics.step_physics(np.zeros((3, 2, 8)))
+  assert [env.step_outcome().last() for env in together] == [
+      False, False, True]
+  with pytest.raises(RuntimeError, match="reset"):
+    physics.step_physics(np.zeros((3, 2, 8)))
+  physics.step_physics(np.zeros((2, 2, 8)), [0, 1])  # The others go on.
+
+
+def test_a_copy_that_diverges_ends_its_own_episode_only(compiled_calls):
+  together = _copies("transport", 2, {})
+  physics = environment.LockstepPhysics(together)
+  together[1].physics.data.qvel[:] = 1e30
+  physics.step_physics(np.zeros((3, 2, 8)))
+  assert compiled_calls == [3]
+  steps = [env.step_outcome() for env in together]
+  assert [s.last() for s in steps] == [False, True, False]
+  assert [env.physics_diverged for env in together] == [False, True, False]
+  assert float(steps[1].discount) == 0.0
+
+
+def test_a_task_with_its_own_controls_is_stepped_in_python(compiled_calls):
+  """A task that overrides `before_step` gets no compiled physics phase
+  (`compiled_controls()` is None): its own hook runs, copy by copy."""
+  from coop_suite.tasks import transport  # pylint: disable=g-import-not-at-top
+
+  class Doubled(transport.Transport):
+    def before_step(self, physics, action, random_state):
+      super().before_step(physics, action, random_state)
+      physics.data.ctrl[:] *= 0.5
+
+  env = coop_suite.load("transport", 2, seed=0)
+  task = Doubled(2)
+  assert task.compiled_controls() is None
+  assert env.task.compiled_controls() is not None
+  custom = environment.CoopEnvironment(task, 1.0, np.random.RandomState(0))
+  custom.reset()
+  environment.LockstepPhysics([custom]).step_physics(np.ones((1, 2, 8)))
+  np.testing.assert_array_equal(custom.physics.data.ctrl, 0.5)
+  assert not compiled_calls

@@ -155,7 +155,7 @@ class CommandWrapper:
   # same phases for all its copies at once, so that one controller call per
   # low-level step serves every copy (`controller_input(out=...)` writes
   # into the rows of one shared array), and `advance` in its two phases
-  # (every copy's physics, then every copy's outcome).
+  # (every copy's physics together, then every copy's outcome).
 
   def begin(self, commands) -> None:
     """Starts a command period with `commands` [n_agents, 2]."""
@@ -203,7 +203,9 @@ class CommandWrapper:
     return self.advance_outcome()
 
   def advance_physics(self, actions) -> None:
-    """`advance`'s first phase: the environment's `step_physics`."""
+    """`advance`'s first phase: the environment's `step_physics` (nothing
+    else, so `EnvBatch` runs its copies' first phases together through
+    their environments, `coop_suite.environment.LockstepPhysics`)."""
     self._env.step_physics(actions)
 
   def advance_outcome(self) -> bool:

@@ -8,7 +8,10 @@ computation (docs/performance.md has the measurements):
   composer's per-observable buffers and schedules.
 * `FusedStep` (`stepping.py`): the substeps of a control step in one
   physics call, without dm_control's per-call Python, when no hook runs
-  between substeps.
+  between substeps; for the tasks' own controls (`CoopTask.compiled_controls`)
+  the controls written from compiled code instead of composer's hooks, for
+  many environment copies at once in `physics_phases`
+  (`coop_suite.environment.LockstepPhysics`).
 * `StateCache` (`state_cache.py`): what the task computes from one physics
   state (frames, features, its `measure`) is computed once, not once per
   observable and hook.
@@ -24,5 +27,6 @@ rewards, discounts and episode metrics on every task.
 from coop_suite.fast.observation import LeanUpdater
 from coop_suite.fast.state_cache import StateCache
 from coop_suite.fast.stepping import FusedStep
+from coop_suite.fast.stepping import physics_phases
 
-__all__ = ["FusedStep", "LeanUpdater", "StateCache"]
+__all__ = ["FusedStep", "LeanUpdater", "StateCache", "physics_phases"]

@@ -8,39 +8,17 @@ geoms `terrain_geoms` selects once per model with `mj_ray`'s own filters:
 the same distances, bit for bit (`tests/test_kernels.py`).
 """
 
-import glob
-import os
-
-from llvmlite import binding as llvm
 import mujoco
 import numba
 import numpy as np
 
+from coop_suite.fast import libmujoco
 
-def _declare_ray_geom():
-  """MuJoCo's `mju_rayGeom` (one ray against one primitive geom), callable
-  from the kernels.
-
-  The mujoco package ships its shared library beside its bindings; loading
-  it into LLVM's symbol table lets compiled code call it by name, which (unlike
-  a ctypes pointer) survives numba's on-disk cache. Pointers are passed as
-  integers, which the C ABI passes like pointers. The last argument (an
-  optional surface normal, NULL here) is absent in older MuJoCo versions,
-  where the C calling convention ignores it.
-  """
-  folder = os.path.dirname(mujoco.__file__)
-  paths = sorted(glob.glob(os.path.join(folder, "libmujoco.so*"))
-                 + glob.glob(os.path.join(folder, "libmujoco*.dylib"))
-                 + glob.glob(os.path.join(folder, "mujoco.dll")))
-  if not paths:
-    raise ImportError(f"MuJoCo's shared library was not found in {folder}.")
-  llvm.load_library_permanently(paths[0])
-  ptr = numba.types.intp
-  return numba.types.ExternalFunction("mju_rayGeom", numba.types.float64(
-      ptr, ptr, ptr, ptr, ptr, numba.types.int32, ptr))
-
-
-_mju_ray_geom = _declare_ray_geom()
+# One ray against one primitive geom. The last argument (an optional surface
+# normal, NULL here) is absent in older MuJoCo versions, where the C calling
+# convention ignores it.
+_mju_ray_geom = libmujoco.function("mju_rayGeom", numba.types.float64(
+    *(libmujoco.POINTER,) * 5, numba.types.int32, libmujoco.POINTER))
 
 
 @numba.njit(cache=True)

@@ -1,11 +1,48 @@
-"""`FusedStep`: composer's control step with its substeps in one call."""
+"""`FusedStep`: composer's control step with its substeps in one call.
+
+Where the task writes its controls the way `CoopTask` does
+(`CoopTask.compiled_controls`), its physics phase writes them from compiled
+code (the actions clipped into the task's action buffer and the controls),
+then runs the substeps, without composer's hooks. `physics_phases` runs the
+physics phases of many such steps (an actor's environment copies) with the
+Python of one.
+"""
+
+import math
 
 from absl import logging
 from dm_control.composer import environment as composer_env
 from dm_control.rl import control
 import dm_env
 import mujoco
+import numba
 import numpy as np
+
+from coop_suite.fast import libmujoco
+
+# A compiled step's addresses (`FusedStep.addresses`), one row per step: its
+# first control, the task's action buffer, its mjData's warnings.
+_CONTROLS, _ACTIONS, _WARNINGS = range(3)
+
+_WARNING_NAMES = list(mujoco.mjtWarning.__members__)
+_N_WARNINGS = int(mujoco.mjtWarning.mjNWARNING)
+
+
+def _warning_layout(warning):
+  """Whether mjData's warnings are `_read_warnings`' pairs of ints
+  (lastinfo, number), `_N_WARNINGS` of them."""
+  start = warning.lastinfo.ctypes.data
+  return (warning.number.shape == (_N_WARNINGS,)
+          and warning.number.dtype == np.int32
+          and warning.number.strides == (8,)
+          and warning.number.ctypes.data == start + 4)
+
+
+def _physics_error(new_warnings):
+  """The `PhysicsError` for MuJoCo warnings counted anew ([bool] each)."""
+  names = np.compress(new_warnings, _WARNING_NAMES)
+  return control.PhysicsError(
+      f"Physics state is invalid. Warning(s) raised: {', '.join(names)}")
 
 
 class SubstepRunner:
@@ -39,10 +76,94 @@ class SubstepRunner:
       mujoco.mj_step(model, data, n - 1)
     mujoco.mj_step1(model, data)
     if warnings.tobytes() != before:
-      new = warnings > np.frombuffer(before, dtype=warnings.dtype)
-      names = np.compress(new, list(mujoco.mjtWarning.__members__))
-      raise control.PhysicsError(
-          f"Physics state is invalid. Warning(s) raised: {', '.join(names)}")
+      raise _physics_error(
+          warnings > np.frombuffer(before, dtype=warnings.dtype))
+
+
+@numba.njit(cache=True)
+def _write_controls(addresses, actions, low, high, n_warnings, clipped,
+                    before):
+  """For each row e of `addresses` (`_CONTROLS`...): its actions [n, d]
+  clipped to [low[j], high[j]] into `clipped[e]`, the task's action buffer
+  [n, d] and the n * d controls from the first; its warning counters into
+  `before[e]`. Returns -1, or the first row whose actions hold a NaN or an
+  inf (then nothing was written)."""
+  steps, n, d = actions.shape
+  for e in range(steps):
+    for i in range(n):
+      for j in range(d):
+        if not math.isfinite(actions[e, i, j]):
+          return e
+  for e in range(steps):
+    controls = numba.carray(libmujoco.pointer(addresses[e, _CONTROLS]),
+                            n * d, np.float64)
+    buffer = numba.carray(libmujoco.pointer(addresses[e, _ACTIONS]), n * d,
+                          np.float64)
+    for i in range(n):
+      for j in range(d):
+        value = min(max(actions[e, i, j], low[j]), high[j])
+        clipped[e, i, j] = value
+        buffer[i * d + j] = value
+        controls[i * d + j] = value
+    _read_warnings(addresses[e, _WARNINGS], n_warnings, before[e])
+  return -1
+
+
+@numba.njit(cache=True)
+def _read_warnings(address, n_warnings, out):
+  """mjData's warning counters into `out`: mjWarningStat is {int lastinfo;
+  int number;}, so the counters are the odd ints from `address`."""
+  warnings = numba.carray(libmujoco.pointer(address), 2 * n_warnings,
+                          np.int32)
+  for k in range(n_warnings):
+    out[k] = warnings[2 * k + 1]
+
+
+@numba.njit(cache=True)
+def _new_warnings(addresses, before, new, diverged):
+  """`new[e, k]`: whether row e's warning counter k grew since `before`;
+  `diverged[e]`: whether any did."""
+  now = np.empty(before.shape[1], np.int32)
+  for e in range(addresses.shape[0]):
+    _read_warnings(addresses[e, _WARNINGS], before.shape[1], now)
+    diverged[e] = False
+    for k in range(before.shape[1]):
+      new[e, k] = now[k] > before[e, k]
+      diverged[e] |= new[e, k]
+
+
+def physics_phases(steppers, addresses, actions, low, high):
+  """The physics phases of `steppers` (`FusedStep`s with `addresses`, of
+  copies of one task): the controls of all in one compiled call, then each
+  one's substeps (MuJoCo's Python functions, so that a fatal MuJoCo error
+  still raises `mujoco.FatalError`), then the warnings of all in one call.
+
+  Args:
+    steppers: the steps, E of them.
+    addresses: their `addresses` rows stacked, [E, 5] intp (callers that step
+      the same copies again keep it).
+    actions: [E, n, d] float32 or float64: row e is steppers[e]'s action.
+    low, high: the action bounds [d] of every one of them.
+
+  Returns:
+    The clipped actions [E, n, d] float64; None if a row holds a NaN or an
+    inf, in which case nothing was written or stepped.
+  """
+  clipped = np.empty(actions.shape)
+  before = np.empty((len(steppers), _N_WARNINGS), np.int32)
+  if _write_controls(addresses, actions, low, high, _N_WARNINGS, clipped,
+                     before) >= 0:
+    return None
+  for stepper in steppers:
+    stepper.compiled_substeps()
+  new = np.empty(before.shape, np.bool_)
+  diverged = np.empty(len(steppers), np.bool_)
+  _new_warnings(addresses, before, new, diverged)
+  if diverged.any():
+    for stepper, stepper_diverged, stepper_new in zip(steppers, diverged, new):
+      if stepper_diverged:
+        stepper.diverged(stepper_new)
+  return clipped
 
 
 class FusedStep:
@@ -55,17 +176,41 @@ class FusedStep:
   one environment.
   """
 
-  def __init__(self, env, substeps):
+  def __init__(self, env, substeps, compiled_controls=None):
     self._env = env
     self.substeps = substeps
     """The `SubstepRunner`, or None where `physics.step` runs them."""
     self._diverged = False  # Whether the last `step_physics` diverged.
+    self.addresses = None
+    """Where a compiled physics phase (`physics_phases`) writes and reads
+    (`_CONTROLS`...), or None where composer's hooks write the controls."""
+    self.action_bounds = None
+    """(low [d], high [d]) of a compiled step's actions."""
+    if compiled_controls is not None:
+      buffer, first, self.action_bounds = compiled_controls
+      data = env.physics.data.ptr
+      self.substep_call = (env.physics.model.ptr, data,
+                           env._n_sub_steps - 1)  # pylint: disable=protected-access
+      """(MjModel, MjData, the `mj_step` calls between `mj_step2` and
+      `mj_step1`)."""
+      self._buffer = buffer  # Its memory is written at `addresses`.
+      self.addresses = (data.ctrl.ctypes.data + 8 * first,
+                        buffer.ctypes.data,
+                        data.warning.lastinfo.ctypes.data)
+      self._address_table = np.array([self.addresses], np.intp)
 
   @classmethod
-  def make(cls, env):
+  def make(cls, env, action_bounds=None):
     """A `FusedStep` for `env` (a composer.Environment just reset), or None
     where composer's own step must run: an observable with non-default
-    settings (composer's updater is in use) or a hook between substeps."""
+    settings (composer's updater is in use) or a hook between substeps.
+
+    Its physics phase is compiled (`addresses`) where the task offers it
+    (`compiled_controls()`: its action buffer and first control), no other
+    hook runs before the step, the substeps can be fused, physics errors end
+    the episode rather than raise, and `action_bounds` (low [d], high [d],
+    every agent's) are given.
+    """
     # pylint: disable=protected-access
     hooks, task = env._hooks, env.task
     if (not getattr(env._observation_updater, "lean", False)
@@ -76,7 +221,23 @@ class FusedStep:
         or not composer_env._callable_is_trivial(task.before_substep)
         or not composer_env._callable_is_trivial(task.after_substep)):
       return None
-    return cls(env, SubstepRunner.make(env.physics))
+    substeps = SubstepRunner.make(env.physics)
+    controls = getattr(task, "compiled_controls", lambda: None)()
+    compiled = None
+    if (substeps is not None and controls is not None
+        and action_bounds is not None
+        and not hooks._before_step.entity_hooks
+        and not hooks._before_step.extra_hooks
+        and not env._raise_exception_on_physics_error):
+      buffer, first = controls
+      low, high = (np.ascontiguousarray(b, np.float64) for b in action_bounds)
+      warning = env.physics.data.ptr.warning
+      if (_warning_layout(warning) and buffer.dtype == np.float64
+          and buffer.flags.c_contiguous
+          and buffer.ndim == 2 and low.shape == high.shape == buffer.shape[1:]
+          and 0 <= first and first + buffer.size <= env.physics.model.nu):
+        compiled = (buffer, int(first), (low, high))
+    return cls(env, substeps, compiled)
 
   def step(self, action, observe=True):
     """One control step of the validated `action`; a `dm_env.TimeStep`."""
@@ -89,6 +250,11 @@ class FusedStep:
 
   def step_physics(self, action):
     """The first phase of `step`: the hooks before it, then the substeps."""
+    if self.addresses is not None:
+      if physics_phases((self,), self._address_table, action[None],
+                        *self.action_bounds) is None:
+        raise ValueError("Actions contain NaN or inf.")
+      return
     env = self._env
     # pylint: disable=protected-access
     env._hooks.before_step(env._physics_proxy, action, env._random_state)
@@ -103,6 +269,34 @@ class FusedStep:
         raise
       logging.warning(e)
       self._diverged = True
+
+  def compiled_substeps(self):
+    """A compiled physics phase's step after its controls (`physics_phases`):
+    what composer's hooks before a step do besides the controls (the
+    episode's step count, with its log line; the task's `state_changed`),
+    then the substeps as `SubstepRunner.step` runs them (their warnings are
+    checked for all steps at once: see `diverged`)."""
+    env = self._env
+    hooks = env._hooks  # pylint: disable=protected-access
+    hooks._episode_step_count += 1  # pylint: disable=protected-access
+    if (hooks._episode_step_count  # pylint: disable=protected-access
+        % composer_env._STEPS_LOGGING_INTERVAL == 0):  # pylint: disable=protected-access
+      logging.info("The current episode has been running for %d steps.",
+                   hooks._episode_step_count)  # pylint: disable=protected-access
+    env.task.state_changed()
+    self._diverged = False
+    model, data, more = self.substep_call
+    mujoco.mj_step2(model, data)
+    if more:
+      mujoco.mj_step(model, data, more)
+    mujoco.mj_step1(model, data)
+
+  def diverged(self, new_warnings):
+    """After `compiled_substeps`: MuJoCo counted the warnings
+    `new_warnings` ([bool] each) anew; logged as `step_physics` does, and the
+    step ends the episode."""
+    self._diverged = True
+    logging.warning(_physics_error(new_warnings))
 
   def step_outcome(self, observe=True):
     """The second phase of `step`: the hooks after it, reward, discount,

@@ -338,6 +338,17 @@ class CoopTask(composer.Task):
     self._last_actions[:] = action
     self._mjdata.ctrl[self._actuator_ids] = self._last_actions.ravel()
 
+  def compiled_controls(self):
+    """(the action buffer [n_agents, 8], the index of the first control)
+    where compiled code may do what `before_step` does, i.e. where it is
+    this class's own and the agents' controls are consecutive: a compiled
+    physics phase (`coop_suite.fast.FusedStep`) clips the actions into the
+    buffer and the controls, and calls `state_changed()`. None otherwise."""
+    if (type(self).before_step is not CoopTask.before_step
+        or not isinstance(self._actuator_ids, slice)):
+      return None
+    return self._last_actions, self._actuator_ids.start
+
   def after_step(self, physics, random_state):
     self._steps += 1
     succeeded_before = self._success
