@@ -256,13 +256,18 @@ class LockstepPhysics:
 
   `step_physics(actions, active)` is `envs[e].step_physics(actions[k])` for
   the k-th copy e of `active`, the same numbers, with the Python of one
-  physics phase (`fast.physics_phases`: every copy's controls in one
-  compiled call, each copy's substeps, every copy's warnings in one call)
-  where every one of them is on the fast path with compiled controls
-  (`fast.FusedStep.make`); otherwise, or where an action is not finite,
-  copy by copy (which raises the usual errors). An actor's copies stepped
-  in lockstep (`runners.rollout.EnvBatch`) skip composer's hooks and the
-  action checks per copy (docs/performance.md).
+  physics phase where every one of them is on the fast path with compiled
+  controls (`fast.FusedStep.make`) and `actions` is one float array of the
+  right shape: every copy's controls in one compiled call
+  (`fast.write_controls`), each copy's substeps, every copy's warnings in
+  one call (`fast.check_warnings`). Otherwise, or where an action is not
+  finite, copy by copy, which raises the usual errors. An actor's copies
+  stepped in lockstep (`runners.rollout.EnvBatch`) so skip composer's hooks
+  and the action checks per copy (docs/performance.md).
+
+  Should MuJoCo raise (`mujoco.FatalError`) in one copy's substeps, the
+  copies before it have stepped, as copy by copy, and those after it have
+  their controls written but not stepped: reset them.
   """
 
   def __init__(self, envs):
@@ -272,7 +277,7 @@ class LockstepPhysics:
     """
     self._envs = list(envs)
     self._steppers = None  # Those the table below was made for.
-    self._table = None  # (addresses [E, 3], low, high), or None: copy by copy.
+    self._table = None  # (addresses [E, 3], low, high, [n, d]) or None.
 
   def step_physics(self, actions, active=None):
     """Steps the physics of copies `active` (indices; all if None) with
@@ -285,34 +290,49 @@ class LockstepPhysics:
     if self._steppers is None or len(steppers) != len(self._steppers) or any(
         a is not b for a, b in zip(steppers, self._steppers)):
       self._steppers, self._table = steppers, self._make_table(chosen)
-    clipped = None
-    if self._table is not None and not any(
-        env._reset_next_step for env in chosen):  # pylint: disable=protected-access
-      addresses, low, high = self._table
-      clipped = fast.physics_phases(steppers, addresses, actions, low, high)
-    if clipped is None:
+    written = None
+    if (self._table is not None and type(actions) is np.ndarray  # pylint: disable=unidiomatic-typecheck
+        and actions.dtype in _KERNEL_DTYPES
+        and actions.shape[1:] == self._table[3]
+        and not any(env._reset_next_step for env in chosen)):  # pylint: disable=protected-access
+      addresses, low, high, _ = self._table
+      written = fast.write_controls(steppers, addresses, actions, low, high)
+    if written is None:
       for env, action in zip(chosen, actions):
         env.step_physics(action)
       return
-    for env, action in zip(chosen, clipped):
-      env._pending_action = action  # pylint: disable=protected-access
+    clipped, before = written
+    stepped = 0
+    try:
+      for env, stepper, action in zip(chosen, steppers, clipped):
+        env._pending_action = action  # pylint: disable=protected-access
+        stepper.compiled_substeps()
+        stepped += 1
+    finally:  # Those stepped are checked, even if one raised.
+      fast.check_warnings(steppers[:stepped], addresses[:stepped],
+                          before[:stepped])
 
   @staticmethod
   def _make_table(chosen):
-    """What `fast.physics_phases` needs for `chosen`, or None if one of
+    """What `fast.write_controls` needs for `chosen`, or None if one of
     them cannot be stepped by it (then all go copy by copy)."""
-    if not all(isinstance(env, CoopEnvironment) and env._stepper is not None  # pylint: disable=protected-access
-               and env._stepper.addresses is not None for env in chosen):  # pylint: disable=protected-access
+    # pylint: disable=protected-access
+    if not all(isinstance(env, CoopEnvironment)
+               and type(env).step_physics is CoopEnvironment.step_physics
+               and type(env).validate_action is CoopEnvironment.validate_action
+               and env._stepper is not None
+               and env._stepper.addresses is not None for env in chosen):
       return None
-    first = chosen[0]._stepper  # pylint: disable=protected-access
+    first = chosen[0]._stepper
     low, high = first.action_bounds
     for env in chosen:
-      stepper = env._stepper  # pylint: disable=protected-access
-      if (not np.array_equal(stepper.action_bounds[0], low)
+      stepper = env._stepper
+      if (stepper.action_shape != first.action_shape
+          or not np.array_equal(stepper.action_bounds[0], low)
           or not np.array_equal(stepper.action_bounds[1], high)):
         return None
-    return (np.array([env._stepper.addresses for env in chosen], np.intp),  # pylint: disable=protected-access
-            low, high)
+    return (np.array([env._stepper.addresses for env in chosen], np.intp),
+            low, high, first.action_shape)
 
 
 def _rebuild(load_arguments):

@@ -177,6 +177,53 @@ def test_copies_stepped_together_keep_the_copy_by_copy_errors():
   physics.step_physics(np.zeros((2, 2, 8)), [0, 1])  # The others go on.
 
 
+@pytest.mark.parametrize("shape, error", [
+    ((3, 3, 8), "Expected actions for 2 agents, got 3"),
+    ((3, 2, 7), r"agent 0 has shape \(7,\); expected \(8,\)"),
+    ((3, 2, 9), r"agent 0 has shape \(9,\)")])
+def test_actions_of_a_wrong_shape_get_the_copy_by_copy_error(shape, error,
+                                                             compiled_calls):
+  together = _copies("transport", 2, {})
+  controls = [env.physics.data.ctrl.copy() for env in together]
+  with pytest.raises(ValueError, match=error):
+    environment.LockstepPhysics(together).step_physics(np.zeros(shape))
+  assert not compiled_calls  # Nothing written past any buffer.
+  for env, before in zip(together, controls):
+    np.testing.assert_array_equal(env.physics.data.ctrl, before)
+
+
+def test_other_actions_than_one_float_array_go_copy_by_copy(compiled_calls):
+  """Integer actions or a list of per-copy lists are valid copy by copy;
+  together they are stepped copy by copy, with the same numbers."""
+  together, alone = _copies("transport", 2, {}), _copies("transport", 2, {})
+  physics = environment.LockstepPhysics(together)
+  for actions, each in ((np.ones((3, 2, 8), np.int64), np.ones((2, 8))),
+                        ([[[0.5] * 8] * 2] * 3, np.full((2, 8), 0.5))):
+    physics.step_physics(actions)
+    for together_env, alone_env in zip(together, alone):
+      _assert_identical(together_env.step_outcome(), alone_env.step(each),
+                        str(type(actions)))
+  assert compiled_calls == [1] * 12  # Each copy on its own (and alone).
+
+
+def test_a_fatal_error_in_one_copy_leaves_those_before_it_stepped(
+    monkeypatch):
+  """A `mujoco.FatalError` in one copy's substeps propagates; the copies
+  stepped before it are complete (their warnings checked)."""
+  import mujoco  # pylint: disable=g-import-not-at-top
+  together = _copies("transport", 2, {})
+  physics = environment.LockstepPhysics(together)
+  together[0].physics.data.qvel[:] = 1e30  # Diverges.
+
+  def fatal():
+    raise mujoco.FatalError("mj_stackAlloc: out of memory")
+  monkeypatch.setattr(together[1]._stepper, "compiled_substeps", fatal)  # pylint: disable=protected-access
+  with pytest.raises(mujoco.FatalError, match="out of memory"):
+    physics.step_physics(np.zeros((3, 2, 8)))
+  assert together[0].step_outcome().last()
+  assert together[0].physics_diverged
+
+
 def test_a_copy_that_diverges_ends_its_own_episode_only(compiled_calls):
   together = _copies("transport", 2, {})
   physics = environment.LockstepPhysics(together)
@@ -203,6 +250,8 @@ def test_a_task_with_its_own_controls_is_stepped_in_python(compiled_calls):
   task = Doubled(2)
   assert task.compiled_controls() is None
   assert env.task.compiled_controls() is not None
+  env.task.before_step = lambda *args: None  # Replaced on the instance.
+  assert env.task.compiled_controls() is None
   custom = environment.CoopEnvironment(task, 1.0, np.random.RandomState(0))
   custom.reset()
   environment.LockstepPhysics([custom]).step_physics(np.ones((1, 2, 8)))

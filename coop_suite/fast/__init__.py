@@ -10,7 +10,7 @@ computation (docs/performance.md has the measurements):
   physics call, without dm_control's per-call Python, when no hook runs
   between substeps; for the tasks' own controls (`CoopTask.compiled_controls`)
   the controls written from compiled code instead of composer's hooks, for
-  many environment copies at once in `physics_phases`
+  many environment copies at once in `write_controls` and `check_warnings`
   (`coop_suite.environment.LockstepPhysics`).
 * `StateCache` (`state_cache.py`): what the task computes from one physics
   state (frames, features, its `measure`) is computed once, not once per
@@ -26,7 +26,9 @@ rewards, discounts and episode metrics on every task.
 
 from coop_suite.fast.observation import LeanUpdater
 from coop_suite.fast.state_cache import StateCache
+from coop_suite.fast.stepping import check_warnings
 from coop_suite.fast.stepping import FusedStep
-from coop_suite.fast.stepping import physics_phases
+from coop_suite.fast.stepping import write_controls
 
-__all__ = ["FusedStep", "LeanUpdater", "StateCache", "physics_phases"]
+__all__ = ["FusedStep", "LeanUpdater", "StateCache", "check_warnings",
+           "write_controls"]

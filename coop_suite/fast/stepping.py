@@ -3,9 +3,9 @@
 Where the task writes its controls the way `CoopTask` does
 (`CoopTask.compiled_controls`), its physics phase writes them from compiled
 code (the actions clipped into the task's action buffer and the controls),
-then runs the substeps, without composer's hooks. `physics_phases` runs the
-physics phases of many such steps (an actor's environment copies) with the
-Python of one.
+then runs the substeps, without composer's hooks. `write_controls` and
+`check_warnings` do their parts for many such steps (an actor's environment
+copies) in one call each.
 """
 
 import math
@@ -132,30 +132,47 @@ def _new_warnings(addresses, before, new, diverged):
       diverged[e] |= new[e, k]
 
 
-def physics_phases(steppers, addresses, actions, low, high):
-  """The physics phases of `steppers` (`FusedStep`s with `addresses`, of
-  copies of one task): the controls of all in one compiled call, then each
-  one's substeps (MuJoCo's Python functions, so that a fatal MuJoCo error
-  still raises `mujoco.FatalError`), then the warnings of all in one call.
+def write_controls(steppers, addresses, actions, low, high):
+  """The first part of the physics phases of `steppers` (`FusedStep`s with
+  `addresses`, of copies of one task): every one's controls in one compiled
+  call. Each step then runs its `compiled_substeps`, and `check_warnings`
+  ends them.
 
   Args:
     steppers: the steps, E of them.
-    addresses: their `addresses` rows stacked, [E, 5] intp (callers that step
+    addresses: their `addresses` rows stacked, [E, 3] intp (callers that step
       the same copies again keep it).
-    actions: [E, n, d] float32 or float64: row e is steppers[e]'s action.
+    actions: [E, n, d] float32 or float64, d = len(low): row e is
+      steppers[e]'s action, [n, d] its `action_shape`.
     low, high: the action bounds [d] of every one of them.
 
   Returns:
-    The clipped actions [E, n, d] float64; None if a row holds a NaN or an
-    inf, in which case nothing was written or stepped.
+    (the clipped actions [E, n, d] float64, the warning counters before the
+    substeps [E, mjNWARNING]); None if a row holds a NaN or an inf, in which
+    case nothing was written.
+
+  Raises:
+    ValueError: `actions` is not [E, n, d] float32 or float64.
   """
+  if (actions.dtype not in _ACTION_DTYPES or len(steppers) != len(addresses)
+      or actions.shape != (len(steppers),) + steppers[0].action_shape
+      or low.shape != actions.shape[2:] or high.shape != actions.shape[2:]):
+    raise ValueError(f"Expected float actions of shape "
+                     f"{(len(steppers),) + steppers[0].action_shape} for "
+                     f"{len(addresses)} addresses, got {actions.dtype} "
+                     f"{actions.shape}.")
   clipped = np.empty(actions.shape)
   before = np.empty((len(steppers), _N_WARNINGS), np.int32)
   if _write_controls(addresses, actions, low, high, _N_WARNINGS, clipped,
                      before) >= 0:
     return None
-  for stepper in steppers:
-    stepper.compiled_substeps()
+  return clipped, before
+
+
+def check_warnings(steppers, addresses, before):
+  """The last part of the physics phases of `steppers` (after each one's
+  `compiled_substeps`): every one's warning counters against `before` in
+  one compiled call; a step with new ones diverged (`FusedStep.diverged`)."""
   new = np.empty(before.shape, np.bool_)
   diverged = np.empty(len(steppers), np.bool_)
   _new_warnings(addresses, before, new, diverged)
@@ -163,7 +180,9 @@ def physics_phases(steppers, addresses, actions, low, high):
     for stepper, stepper_diverged, stepper_new in zip(steppers, diverged, new):
       if stepper_diverged:
         stepper.diverged(stepper_new)
-  return clipped
+
+
+_ACTION_DTYPES = (np.dtype(np.float32), np.dtype(np.float64))
 
 
 class FusedStep:
@@ -182,12 +201,16 @@ class FusedStep:
     """The `SubstepRunner`, or None where `physics.step` runs them."""
     self._diverged = False  # Whether the last `step_physics` diverged.
     self.addresses = None
-    """Where a compiled physics phase (`physics_phases`) writes and reads
-    (`_CONTROLS`...), or None where composer's hooks write the controls."""
+    """Where a compiled physics phase (`write_controls`, `check_warnings`)
+    writes and reads (`_CONTROLS`...), or None where composer's hooks write
+    the controls."""
     self.action_bounds = None
     """(low [d], high [d]) of a compiled step's actions."""
+    self.action_shape = None
+    """[n, d] of a compiled step's actions (its task's action buffer)."""
     if compiled_controls is not None:
       buffer, first, self.action_bounds = compiled_controls
+      self.action_shape = buffer.shape
       data = env.physics.data.ptr
       self.substep_call = (env.physics.model.ptr, data,
                            env._n_sub_steps - 1)  # pylint: disable=protected-access
@@ -251,9 +274,12 @@ class FusedStep:
   def step_physics(self, action):
     """The first phase of `step`: the hooks before it, then the substeps."""
     if self.addresses is not None:
-      if physics_phases((self,), self._address_table, action[None],
-                        *self.action_bounds) is None:
+      written = write_controls((self,), self._address_table, action[None],
+                               *self.action_bounds)
+      if written is None:
         raise ValueError("Actions contain NaN or inf.")
+      self.compiled_substeps()
+      check_warnings((self,), self._address_table, written[1])
       return
     env = self._env
     # pylint: disable=protected-access
@@ -271,7 +297,7 @@ class FusedStep:
       self._diverged = True
 
   def compiled_substeps(self):
-    """A compiled physics phase's step after its controls (`physics_phases`):
+    """A compiled physics phase's step after its controls (`write_controls`):
     what composer's hooks before a step do besides the controls (the
     episode's step count, with its log line; the task's `state_changed`),
     then the substeps as `SubstepRunner.step` runs them (their warnings are

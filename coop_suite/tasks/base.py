@@ -341,13 +341,18 @@ class CoopTask(composer.Task):
   def compiled_controls(self):
     """(the action buffer [n_agents, 8], the index of the first control)
     where compiled code may do what `before_step` does, i.e. where it is
-    this class's own and the agents' controls are consecutive: a compiled
-    physics phase (`coop_suite.fast.FusedStep`) clips the actions into the
-    buffer and the controls, and calls `state_changed()`. None otherwise."""
-    if (type(self).before_step is not CoopTask.before_step
-        or not isinstance(self._actuator_ids, slice)):
+    this class's own (not overridden, nor replaced on the instance) and the
+    agents' controls are consecutive: a compiled physics phase
+    (`coop_suite.fast.FusedStep`, chosen at each reset) clips the actions
+    into the buffer and the controls, and calls `state_changed()`. None
+    otherwise."""
+    if getattr(self.before_step, "__func__", None) is not CoopTask.before_step:
       return None
-    return self._last_actions, self._actuator_ids.start
+    ids = self._actuator_ids
+    if (not isinstance(ids, slice) or ids.step not in (None, 1)
+        or ids.stop - ids.start != self._last_actions.size):
+      return None
+    return self._last_actions, ids.start
 
   def after_step(self, physics, random_state):
     self._steps += 1
