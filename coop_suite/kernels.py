@@ -177,13 +177,14 @@ def agent_state(xpos, xmat, qpos, qvel, torso, qpos_adr, dof_adr, free_adr,
 
 
 @numba.njit(cache=True)
-def nearest_teammates(frames, k, out, column):
+def nearest_teammates(frames, k, species, out, column):
   """Writes each agent's k nearest teammates into out[:, column:].
 
-  `frames` is `heading_frames`' [n, 5]. Columns: 2k heading-frame offsets
-  (nearest first, zero padding), then k mask values (1 real, 0 padding).
-  Offsets to j from i: d = xy[j] - xy[i], then `to_heading` with agent i's
-  heading. Ties keep the lower index.
+  `frames` is `heading_frames`' [n, 5]; `species` [n] ints: agent i's
+  teammates are the other agents of its species. Columns: 2k heading-frame
+  offsets (nearest first, zero padding), then k mask values (1 real, 0
+  padding). Offsets to j from i: d = xy[j] - xy[i], then `to_heading` with
+  agent i's heading. Ties keep the lower index.
   """
   n = frames.shape[0]
   dist2 = np.empty(n)
@@ -192,7 +193,8 @@ def nearest_teammates(frames, k, out, column):
     cos, sin = frames[i, 3], frames[i, 4]
     for j in range(n):
       dx, dy = frames[j, 0] - xi, frames[j, 1] - yi
-      dist2[j] = dx * dx + dy * dy
+      # -1 marks an agent that is not (or no longer) a candidate.
+      dist2[j] = dx * dx + dy * dy if species[j] == species[i] else -1.0
     dist2[i] = np.inf  # Nobody is their own teammate.
     for slot in range(k):
       best = -1
@@ -249,12 +251,13 @@ def terrain_heights(geom_xpos, geom_xmat, geom_size, geom_type, candidates,
 
 
 @numba.njit(cache=True)
-def shared_exteroception(frames, k, geom_xpos, geom_xmat, geom_size,
+def shared_exteroception(frames, k, species, geom_xpos, geom_xmat, geom_size,
                          geom_type, candidates, local_dirs, scale,
                          origin_height, no_hit):
   """Features every cooperative task shows each agent, [n, 4 + 3k + m]:
-  self_pose (x, y, cos, sin), `nearest_teammates` (2k offsets, k mask) and
-  `terrain_heights` (m samples), in one call."""
+  self_pose (x, y, cos, sin), `nearest_teammates` (2k offsets, k mask; of
+  the agent's own `species`) and `terrain_heights` (m samples), in one
+  call."""
   n, m = frames.shape[0], local_dirs.shape[0]
   out = np.empty((n, 4 + 3 * k + m))
   for i in range(n):
@@ -262,7 +265,7 @@ def shared_exteroception(frames, k, geom_xpos, geom_xmat, geom_size,
     out[i, 1] = frames[i, 1]
     out[i, 2] = frames[i, 3]
     out[i, 3] = frames[i, 4]
-  nearest_teammates(frames, k, out, 4)
+  nearest_teammates(frames, k, species, out, 4)
   terrain_heights(geom_xpos, geom_xmat, geom_size, geom_type, candidates,
                   frames, local_dirs, scale, origin_height, no_hit, out,
                   4 + 3 * k)

@@ -70,25 +70,32 @@ def test_frames_and_proprioception_match_numpy():
       np.testing.assert_array_equal(got[f"proprio/{name}"], value, name)
 
 
-@pytest.mark.parametrize("n,k", [(1, 1), (2, 1), (4, 1), (4, 2), (3, 3),
-                                 (6, 4)])
-def test_nearest_teammates_match_numpy(n, k):
+@pytest.mark.parametrize("n,k,species", [
+    (1, 1, None), (2, 1, None), (4, 1, None), (4, 2, None), (3, 3, None),
+    (6, 4, None), (4, 1, [0, 0, 1, 1]), (5, 3, [1, 0, 1, 1, 0]),
+    (3, 2, [0, 1, 2])])
+def test_nearest_teammates_match_numpy(n, k, species):
+  """Each agent's k nearest agents of its own species (one species where
+  None), as numpy sorts them."""
   rng = np.random.RandomState(n * 10 + k)
   yaw = rng.uniform(-np.pi, np.pi, n)
   frames = exteroception.AgentFrames(rng.uniform(-5, 5, (n, 3)), np.cos(yaw),
                                    np.sin(yaw))
-  offsets, mask = exteroception.nearest_teammates(frames, k)
+  offsets, mask = exteroception.nearest_teammates(frames, k, species)
+  species = np.zeros(n) if species is None else np.asarray(species)
   xy = frames.position[:, :2]
   delta = xy[None] - xy[:, None]
   dist2 = np.einsum("ijk,ijk->ij", delta, delta)
   np.fill_diagonal(dist2, np.inf)
-  m = min(k, n - 1)
-  order = np.argsort(dist2, axis=1, kind="stable")[:, :m]
-  expected = np.zeros((n, k, 2))
-  expected[:, :m] = _numpy_rotate(delta[np.arange(n)[:, None], order],
-                                  frames.cos[:, None], frames.sin[:, None])
-  np.testing.assert_array_equal(offsets, expected.reshape(n, -1))
-  np.testing.assert_array_equal(mask, np.arange(k)[None].repeat(n, 0) < m)
+  dist2[species[:, None] != species[None]] = np.inf
+  order = np.argsort(dist2, axis=1, kind="stable")
+  for i in range(n):
+    m = min(k, int(np.sum(species == species[i])) - 1)
+    expected = np.zeros((k, 2))
+    expected[:m] = _numpy_rotate(delta[i, order[i, :m]], frames.cos[i],
+                                 frames.sin[i])
+    np.testing.assert_array_equal(offsets[i], expected.reshape(-1))
+    np.testing.assert_array_equal(mask[i], np.arange(k) < m)
 
 
 @pytest.mark.parametrize("task,options", [

@@ -96,6 +96,24 @@ def test_nearest_teammate_is_egocentric():
                              rotation @ nearest, atol=1e-9)
 
 
+def test_teammates_are_of_ones_own_species():
+  """In the joint ravine a pusher's teammate is the other pusher and a
+  crosser's the other crosser, as in their stage tasks (one species each),
+  however near an agent of the other species is."""
+  env = coop_suite.load("ravine", 2, n_pushers=2, seed=0)
+  observation = env.reset().observation
+  frames = env.task.frames(env.physics)
+  xy, yaw = frames.position[:, :2], np.arctan2(frames.sin, frames.cos)
+  for i, other in ((0, 1), (1, 0), (2, 3), (3, 2)):  # crossers, pushers
+    c, s = np.cos(yaw[i]), np.sin(yaw[i])
+    np.testing.assert_allclose(
+        observation[i]["extero/teammates"],
+        np.array([[c, s], [-s, c]]) @ (xy[other] - xy[i]), atol=1e-9)
+  alone = coop_suite.load("ravine", 1, n_pushers=1, seed=0).reset()
+  for agent in alone.observation:  # No teammate of one's own species.
+    np.testing.assert_array_equal(agent["extero/teammates_mask"], 0.0)
+
+
 def test_species_and_agent_order():
   env = coop_suite.load("ravine", 3, n_pushers=2, seed=0)
   assert env.task.species == ("crosser",) * 3 + ("pusher",) * 2

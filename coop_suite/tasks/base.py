@@ -166,6 +166,10 @@ class CoopTask(composer.Task):
     self._arena = arena
     self._config = config
     self._species = tuple(species)
+    # Each agent's species as an int: teammates are of one's own species.
+    names = list(dict.fromkeys(self._species))
+    self._species_ids = np.array([names.index(s) for s in self._species],
+                                 np.int64)
     self._walkers = []
     counts = {}
     for kind in self._species:
@@ -612,8 +616,8 @@ class CoopTask(composer.Task):
     if not self.fast_path:
       geom_args = geom_args[:-1] + (_NO_GEOMS,)
     out = kernels.shared_exteroception(
-        frames.as_packed(), self._config.k_neighbours, *geom_args,
-        *self._heights.ray_args)
+        frames.as_packed(), self._config.k_neighbours, self._species_ids,
+        *geom_args, *self._heights.ray_args)
     if not self.fast_path:
       out[:, self._shared_columns[-1][1]] = self._heights.multi_ray(
           physics, frames)

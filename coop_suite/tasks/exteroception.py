@@ -119,15 +119,24 @@ def rotate_to_heading(delta, cos, sin):
   return np.stack([x, y], -1)
 
 
-def nearest_teammates(frames, k):
+def nearest_teammates(frames, k, species=None):
   """Offsets to each agent's k nearest teammates and a validity mask.
+
+  Args:
+    frames: the agents' `AgentFrames`.
+    k: teammates per agent.
+    species: [n] ints, the agents' species: teammates are the other agents
+      of one's own species (None: one species).
 
   Returns:
     offsets: [n, k * 2], heading frame (m), nearest first, zero padding.
     mask: [n, k], 1.0 for a real teammate and 0.0 for padding.
   """
-  out = np.empty((len(frames.cos), 3 * k))
-  kernels.nearest_teammates(frames.as_packed(), k, out, 0)
+  n = len(frames.cos)
+  species = (np.zeros(n, np.int64) if species is None
+             else np.asarray(species, np.int64))
+  out = np.empty((n, 3 * k))
+  kernels.nearest_teammates(frames.as_packed(), k, species, out, 0)
   return out[:, :2 * k], out[:, 2 * k:]
 
 
