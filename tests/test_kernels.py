@@ -98,6 +98,14 @@ def test_nearest_teammates_match_numpy(n, k, species):
     np.testing.assert_array_equal(mask[i], np.arange(k) < m)
 
 
+@pytest.mark.parametrize("species", [[0, 0], [0.5, 0.5, 0, 1], ["a"] * 4])
+def test_nearest_teammates_refuse_species_of_the_wrong_form(species):
+  frames = exteroception.AgentFrames(np.zeros((4, 3)), np.ones(4),
+                                   np.zeros(4))
+  with pytest.raises(ValueError, match="species must be 4 integers"):
+    exteroception.nearest_teammates(frames, 1, species)
+
+
 @pytest.mark.parametrize("task,options", [
     ("ravine", {}), ("transport", {}), ("corridor", {}),
     ("ravine", {"stage": "crossers"})])

@@ -66,7 +66,8 @@ class TaskConfig:
   time_limit: float = 30.0
   """Episode length (s) after which the episode is truncated."""
   k_neighbours: int = 1
-  """Number of nearest teammates in each agent's exteroception."""
+  """Number of nearest teammates (agents of its own species) in each
+  agent's exteroception."""
   height_grid: int = 3
   """Height samples form a `height_grid` x `height_grid` square."""
   height_spacing: float = 0.6

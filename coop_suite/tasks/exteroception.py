@@ -133,8 +133,14 @@ def nearest_teammates(frames, k, species=None):
     mask: [n, k], 1.0 for a real teammate and 0.0 for padding.
   """
   n = len(frames.cos)
-  species = (np.zeros(n, np.int64) if species is None
-             else np.asarray(species, np.int64))
+  if species is None:
+    species = np.zeros(n, np.int64)
+  else:
+    species = np.asarray(species)
+    if species.shape != (n,) or species.dtype.kind not in "iu":
+      raise ValueError(f"species must be {n} integers, one per agent; got "
+                       f"{species.dtype} {species.shape}.")
+    species = species.astype(np.int64)
   out = np.empty((n, 3 * k))
   kernels.nearest_teammates(frames.as_packed(), k, species, out, 0)
   return out[:, :2 * k], out[:, 2 * k:]
