@@ -14,8 +14,9 @@ them; timed alone and warm they would look two to three times cheaper.
 `--lockstep` does the same for what an actor runs in training: `--copies`
 copies stepped in lockstep by `EnvBatch` with the shipped lower layer and
 random commands (the lower layer's input and call, the physics phase of
-all copies at once, and each copy's outcome phase, `docs/performance.md`). Run it pinned to one core
-with the actors' settings, e.g. `JAX_PLATFORMS=cpu OMP_NUM_THREADS=1
+all copies at once, and each copy's outcome phase, `docs/performance.md`).
+Run it pinned to one core with the actors' settings, e.g.
+`JAX_PLATFORMS=cpu OMP_NUM_THREADS=1
 XLA_FLAGS=--xla_cpu_multi_thread_eigen=false taskset -c 1 python ...`.
 """
 
