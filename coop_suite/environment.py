@@ -203,7 +203,7 @@ class CoopEnvironment(composer.Environment):
         action = stacked
     if (type(action) is np.ndarray and action.shape == shape  # pylint: disable=unidiomatic-typecheck
         and action.dtype.kind == "f"):
-      if action.dtype not in _KERNEL_DTYPES:
+      if action.dtype not in fast.ACTION_DTYPES:
         # float16, long double, big-endian...: the compiled kernel takes
         # native float32/float64 only.
         action = action.astype(np.float64)
@@ -248,9 +248,6 @@ class CoopEnvironment(composer.Environment):
     return metrics
 
 
-_KERNEL_DTYPES = (np.dtype(np.float32), np.dtype(np.float64))
-
-
 class LockstepPhysics:
   """The physics phases of copies of one task, stepped together.
 
@@ -277,7 +274,7 @@ class LockstepPhysics:
     """
     self._envs = list(envs)
     self._steppers = None  # Those the table below was made for.
-    self._table = None  # (addresses [E, 3], low, high, [n, d]) or None.
+    self._table = None  # (addresses [E, 3], low, high) or None.
 
   def step_physics(self, actions, active=None):
     """Steps the physics of copies `active` (indices; all if None) with
@@ -291,11 +288,9 @@ class LockstepPhysics:
         a is not b for a, b in zip(steppers, self._steppers)):
       self._steppers, self._table = steppers, self._make_table(chosen)
     written = None
-    if (self._table is not None and type(actions) is np.ndarray  # pylint: disable=unidiomatic-typecheck
-        and actions.dtype in _KERNEL_DTYPES
-        and actions.shape[1:] == self._table[3]
-        and not any(env._reset_next_step for env in chosen)):  # pylint: disable=protected-access
-      addresses, low, high, _ = self._table
+    if self._table is not None and not any(
+        env._reset_next_step for env in chosen):  # pylint: disable=protected-access
+      addresses, low, high = self._table
       written = fast.write_controls(steppers, addresses, actions, low, high)
     if written is None:
       for env, action in zip(chosen, actions):
@@ -332,7 +327,7 @@ class LockstepPhysics:
           or not np.array_equal(stepper.action_bounds[1], high)):
         return None
     return (np.array([env._stepper.addresses for env in chosen], np.intp),
-            low, high, first.action_shape)
+            low, high)
 
 
 def _rebuild(load_arguments):

@@ -26,9 +26,10 @@ rewards, discounts and episode metrics on every task.
 
 from coop_suite.fast.observation import LeanUpdater
 from coop_suite.fast.state_cache import StateCache
+from coop_suite.fast.stepping import ACTION_DTYPES
 from coop_suite.fast.stepping import check_warnings
 from coop_suite.fast.stepping import FusedStep
 from coop_suite.fast.stepping import write_controls
 
-__all__ = ["FusedStep", "LeanUpdater", "StateCache", "check_warnings",
-           "write_controls"]
+__all__ = ["ACTION_DTYPES", "FusedStep", "LeanUpdater", "StateCache",
+           "check_warnings", "write_controls"]

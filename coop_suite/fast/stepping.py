@@ -69,15 +69,21 @@ class SubstepRunner:
     return cls(physics)
 
   def step(self, n):
-    model, data, warnings = self._model, self._data, self._warnings
+    warnings = self._warnings
     before = warnings.tobytes()  # Counts only grow: any change is new.
+    self.run(n)
+    if warnings.tobytes() != before:
+      raise _physics_error(
+          warnings > np.frombuffer(before, dtype=warnings.dtype))
+
+  def run(self, n):
+    """The n substeps alone, their warnings unchecked (`step` checks them;
+    a compiled physics phase checks many steps' at once)."""
+    model, data = self._model, self._data
     mujoco.mj_step2(model, data)
     if n > 1:
       mujoco.mj_step(model, data, n - 1)
     mujoco.mj_step1(model, data)
-    if warnings.tobytes() != before:
-      raise _physics_error(
-          warnings > np.frombuffer(before, dtype=warnings.dtype))
 
 
 @numba.njit(cache=True)
@@ -142,25 +148,21 @@ def write_controls(steppers, addresses, actions, low, high):
     steppers: the steps, E of them.
     addresses: their `addresses` rows stacked, [E, 3] intp (callers that step
       the same copies again keep it).
-    actions: [E, n, d] float32 or float64, d = len(low): row e is
-      steppers[e]'s action, [n, d] its `action_shape`.
+    actions: row e is steppers[e]'s action: written only as one
+      `ACTION_DTYPES` array [E, n, d], [n, d] their `action_shape`.
     low, high: the action bounds [d] of every one of them.
 
   Returns:
     (the clipped actions [E, n, d] float64, the warning counters before the
-    substeps [E, mjNWARNING]); None if a row holds a NaN or an inf, in which
-    case nothing was written.
-
-  Raises:
-    ValueError: `actions` is not [E, n, d] float32 or float64.
+    substeps [E, mjNWARNING]); None, with nothing written, if `actions` is
+    anything else or a row holds a NaN or an inf (the steps' own checks then
+    say what is wrong).
   """
-  if (actions.dtype not in _ACTION_DTYPES or len(steppers) != len(addresses)
-      or actions.shape != (len(steppers),) + steppers[0].action_shape
-      or low.shape != actions.shape[2:] or high.shape != actions.shape[2:]):
-    raise ValueError(f"Expected float actions of shape "
-                     f"{(len(steppers),) + steppers[0].action_shape} for "
-                     f"{len(addresses)} addresses, got {actions.dtype} "
-                     f"{actions.shape}.")
+  shape = (len(steppers),) + steppers[0].action_shape
+  if (type(actions) is not np.ndarray or actions.dtype not in ACTION_DTYPES  # pylint: disable=unidiomatic-typecheck
+      or actions.shape != shape or len(addresses) != len(steppers)
+      or low.shape != shape[2:] or high.shape != shape[2:]):
+    return None
   clipped = np.empty(actions.shape)
   before = np.empty((len(steppers), _N_WARNINGS), np.int32)
   if _write_controls(addresses, actions, low, high, _N_WARNINGS, clipped,
@@ -182,7 +184,9 @@ def check_warnings(steppers, addresses, before):
         stepper.diverged(stepper_new)
 
 
-_ACTION_DTYPES = (np.dtype(np.float32), np.dtype(np.float64))
+ACTION_DTYPES = (np.dtype(np.float32), np.dtype(np.float64))
+"""The action dtypes the compiled kernels take (`write_controls`,
+`kernels.clip_finite`)."""
 
 
 class FusedStep:
@@ -211,11 +215,7 @@ class FusedStep:
     if compiled_controls is not None:
       buffer, first, self.action_bounds = compiled_controls
       self.action_shape = buffer.shape
-      data = env.physics.data.ptr
-      self.substep_call = (env.physics.model.ptr, data,
-                           env._n_sub_steps - 1)  # pylint: disable=protected-access
-      """(MjModel, MjData, the `mj_step` calls between `mj_step2` and
-      `mj_step1`)."""
+      data = env.physics.data.ptr  # Kept alive by `substeps`.
       self._buffer = buffer  # Its memory is written at `addresses`.
       self.addresses = (data.ctrl.ctypes.data + 8 * first,
                         buffer.ctypes.data,
@@ -276,8 +276,8 @@ class FusedStep:
     if self.addresses is not None:
       written = write_controls((self,), self._address_table, action[None],
                                *self.action_bounds)
-      if written is None:
-        raise ValueError("Actions contain NaN or inf.")
+      if written is None:  # `validate_action` lets no such action through.
+        raise ValueError(f"Cannot write actions {action!r}.")
       self.compiled_substeps()
       check_warnings((self,), self._address_table, written[1])
       return
@@ -300,8 +300,8 @@ class FusedStep:
     """A compiled physics phase's step after its controls (`write_controls`):
     what composer's hooks before a step do besides the controls (the
     episode's step count, with its log line; the task's `state_changed`),
-    then the substeps as `SubstepRunner.step` runs them (their warnings are
-    checked for all steps at once: see `diverged`)."""
+    then the substeps (`SubstepRunner.run`; their warnings are checked for
+    all steps at once: see `diverged`)."""
     env = self._env
     hooks = env._hooks  # pylint: disable=protected-access
     hooks._episode_step_count += 1  # pylint: disable=protected-access
@@ -311,11 +311,7 @@ class FusedStep:
                    hooks._episode_step_count)  # pylint: disable=protected-access
     env.task.state_changed()
     self._diverged = False
-    model, data, more = self.substep_call
-    mujoco.mj_step2(model, data)
-    if more:
-      mujoco.mj_step(model, data, more)
-    mujoco.mj_step1(model, data)
+    self.substeps.run(env._n_sub_steps)  # pylint: disable=protected-access
 
   def diverged(self, new_warnings):
     """After `compiled_substeps`: MuJoCo counted the warnings
