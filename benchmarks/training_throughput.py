@@ -214,11 +214,17 @@ def main(argv=None):
       capture_output=True, text=True)
   single = json.loads(child.stdout.strip().splitlines()[-1])
   raw = single['raw_steps_per_s']
+  print(f'one core: raw {raw:.0f} control steps/s; ' + ', '.join(
+      f'{k} / raw {v:.2f}' for k, v in single.items()
+      if k != 'raw_steps_per_s'), flush=True)
   actor_pool.init_ray(num_cpus=max(2, os.cpu_count(), *args.actors))
   pipelines = {}
   with tempfile.TemporaryDirectory() as tmp:
     for n in args.actors:
       pipelines[n] = pipeline(args, n, os.path.join(tmp, str(n)))
+      # As it goes: a long scaling curve cut short keeps what it measured.
+      print(f'pipeline, {n} actor{"s" * (n > 1)}: '
+            f'{pipelines[n][0]:.0f} env steps/s', flush=True)
   print(f'{args.task}, {args.n_agents} agents, {args.envs_per_actor} copies '
         f'per actor, {os.cpu_count()} CPUs; raw {raw:.0f} control steps/s '
         'on one core')
