@@ -117,6 +117,10 @@ def test_bad_time_limits_are_rejected(time_limit):
     ("corridor", dict(slit_width=0.0), "slit_width must be > 0"),
     ("corridor", dict(k_neighbours=1.5), "k_neighbours must be an integer"),
     ("ravine", dict(depth=-1.0), "depth must be > 0"),
+    ("ravine", dict(stone_in_path_probability=1.5),
+     r"stone_in_path_probability must be in \[0, 1\]"),
+    ("ravine", dict(stone_in_path_distance=-0.1),
+     "stone_in_path_distance must be >= 0"),
     ("ravine", dict(end_on_success="yes"), "end_on_success must be True or "
      "False"),
     ("walk_velocity", dict(speed_range=(-1.0, 1.0)), "speed_range must be "

@@ -102,6 +102,44 @@ def test_crosser_walks_over_the_stone_and_falls_where_it_is_not():
       assert walker.torso_position(env.physics)[2] < 0.0  # In the trench.
 
 
+def _ravine_starts(stage, episodes=12, **options):
+  """(stone y, crossers' or markers' start ys, every Ant's xy) per reset."""
+  env = coop_suite.load("ravine", 2, stage=stage, seed=3, **options)
+  out = []
+  for _ in range(episodes):
+    env.reset()
+    xy = [w.torso_position(env.physics)[:2] for w in env.task.walkers]
+    out.append((env.task.stone.position(env.physics)[1],
+                env.task._markers[:, 1].copy(), np.array(xy)))
+  env.close()
+  return out
+
+
+def test_crossers_stage_puts_the_stone_in_a_crossers_path_as_often_as_asked():
+  arena_half = coop_suite.load("ravine", 2).task.arena.length / 2
+  always = _ravine_starts("crossers", stone_in_path_probability=1.0)
+  for stone_y, crossers_y, _ in always:
+    assert np.min(np.abs(crossers_y - stone_y)) <= 0.3 + 1e-9
+    assert abs(stone_y) <= arena_half - 1.6 - 0.2 + 1e-9  # Clear of the ends.
+  never = _ravine_starts("crossers", stone_in_path_probability=0.0)
+  offsets = [np.min(np.abs(c - s)) for s, c, _ in never]
+  assert max(offsets) > 1.0  # Anywhere: most resets are off every path.
+  # The shipped default: some of each.
+  default = _ravine_starts("crossers", episodes=24)
+  near = [np.min(np.abs(c - s)) <= 0.3 for s, c, _ in default]
+  assert 0 < sum(near) < len(near)
+
+
+def test_stone_in_path_leaves_the_other_stages_episodes_unchanged():
+  for stage in ("joint", "pushers"):
+    starts = [_ravine_starts(stage, episodes=4, stone_in_path_probability=p)
+              for p in (0.0, 1.0)]
+    for (s0, c0, xy0), (s1, c1, xy1) in zip(*starts):
+      assert s0 == s1
+      np.testing.assert_array_equal(c0, c1)
+      np.testing.assert_array_equal(xy0, xy1)
+
+
 def test_pushers_cannot_climb_out_of_the_trench():
   env = coop_suite.load("ravine", 1, stage="pushers", n_pushers=1, seed=0,
                         time_limit=60)

@@ -88,7 +88,8 @@ class TaskConfig:
 
     Numbers must be finite; a field named after a size, mass, friction or
     duration (`_POSITIVE`) must be > 0, one named after a speed, gap,
-    tolerance, time or distance (`_NON_NEGATIVE`) >= 0, and a tuple named
+    tolerance, time or distance (`_NON_NEGATIVE`) >= 0, one named after a
+    probability (`_UNIT`) in [0, 1], and a tuple named
     after a distance or range is a (low, high) pair with low <= high.
     """
     name_of = type(self).__name__
@@ -108,6 +109,7 @@ _POSITIVE = ("timestep", "time_limit", "period", "spacing", "width",
              "thickness", "depth", "length", "mass", "radius", "friction",
              "memory_mb_per_agent", "k_neighbours", "height_grid")
 _NON_NEGATIVE = ("speed", "gap", "tolerance", "time", "distance", "range")
+_UNIT = ("probability",)  # In [0, 1].
 _RANGES = ("distance", "range")  # Tuples named so are (low, high).
 
 
@@ -153,6 +155,8 @@ def _check_number(where, name, value):
     raise ValueError(f"{where} must be > 0, got {value!r}.")
   if name.endswith(_NON_NEGATIVE) and value < 0:
     raise ValueError(f"{where} must be >= 0, got {value!r}.")
+  if name.endswith(_UNIT) and not 0 <= value <= 1:
+    raise ValueError(f"{where} must be in [0, 1], got {value!r}.")
 
 
 class CoopTask(composer.Task):
