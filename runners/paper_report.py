@@ -292,8 +292,9 @@ def report(args: paper.PaperArgs, plan=None) -> str:
               'stage: the task without the agent-target term; the '
               'ravine\'s pushers stage: the stone in front of the crossers\' '
               'markers; its crossers stage: no pushers and the stone '
-              'anywhere, where the paper\'s reward teaches walking to the '
-              'edge without falling in, so crossings are rare), final '
+              'across a crosser\'s path in half of the episodes, where the '
+              'paper\'s reward teaches walking to the finish line and '
+              'stopping at the edge where the stone is not), final '
               'checkpoints. '
               'The joint runs above start from them; the paper reports no '
               'stage figures.', '',
