@@ -20,7 +20,7 @@ import matplotlib
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # pylint: disable=g-import-not-at-top
 
-_PIPELINE = re.compile(r'^pipeline, (\d+) actors?: (\d+) env steps/s$')
+_PIPELINE = re.compile(r'^pipeline, (\d+) actors?: (\d+) env steps/s')
 _RAW = re.compile(r'^one core: raw (\d+) control steps/s')
 
 

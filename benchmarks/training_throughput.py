@@ -17,6 +17,8 @@ median over the blocks of raw time / measured time. Prints:
   environment + lower layer, copy by copy / raw
                                    (each copy's `CommandWrapper.step`)
   pipeline with N actors / (N x raw), N = 1, 2     (target >= 0.60 at 2)
+    an actor's own rollout / raw    (its rollouts' steps over their time in
+                                     the actor: the pipeline without waits)
   the learner's share of an update with the most actors
 
 `--actors 1 2 4 8 14` measures the pipeline for those actor counts instead
@@ -158,8 +160,22 @@ def one_core(args):
 
 
 def pipeline(args, actors, logdir):
-  """(env steps/s, learner's share) of coop-train's loop with `actors`."""
-  rows = []
+  """(env steps/s, learner's share, an actor's own env steps/s) of
+  coop-train's loop with `actors`.
+
+  An actor's own rate is its rollouts' env steps over the seconds they took
+  in the actor (`Rollout.seconds`), over every actor: what the pipeline's
+  rate would be per actor with no waiting, transfer or learning between
+  rollouts.
+  """
+  rows, rollouts = [], []
+  collect = actor_pool.RayPool.collect
+
+  def recording(pool, *a, **kw):
+    results = collect(pool, *a, **kw)
+    rollouts.append([(r.env_steps, getattr(r, 'seconds', float('nan')))
+                     for r in results])  # Older commits: no seconds.
+    return results
   train_args = _train_args(args, actors, logdir)
   per_update = (actors * args.envs_per_actor
                 * train_args.hierarchy.sequence_length
@@ -168,12 +184,18 @@ def pipeline(args, actors, logdir):
       train_args, total_steps=per_update * args.updates)
   # The callback by position: older commits (the "before" figures of
   # docs/performance.md) name the parameter on_iteration.
-  learner_loop.train(train_args, lambda u, row, pool: rows.append(row))
+  actor_pool.RayPool.collect = recording
+  try:
+    learner_loop.train(train_args, lambda u, row, pool: rows.append(row))
+  finally:
+    actor_pool.RayPool.collect = collect
   rows = rows[1:]  # Without the first update.
   steps = sum(r['sps'] * (r['time/collect'] + r['time/learn']) for r in rows)
   seconds = sum(r['time/collect'] + r['time/learn'] for r in rows)
   learn = sum(r['time/learn'] for r in rows)
-  return steps / seconds, learn / seconds
+  own = [pair for update in rollouts[1:] for pair in update]
+  own_rate = sum(n for n, _ in own) / sum(t for _, t in own)
+  return steps / seconds, learn / seconds, own_rate
 
 
 def _train_args(args, actors, logdir, **overrides):
@@ -224,7 +246,8 @@ def main(argv=None):
       pipelines[n] = pipeline(args, n, os.path.join(tmp, str(n)))
       # As it goes: a long scaling curve cut short keeps what it measured.
       print(f'pipeline, {n} actor{"s" * (n > 1)}: '
-            f'{pipelines[n][0]:.0f} env steps/s', flush=True)
+            f'{pipelines[n][0]:.0f} env steps/s (an actor\'s own rollout: '
+            f'{pipelines[n][2]:.0f} env steps/s)', flush=True)
   print(f'{args.task}, {args.n_agents} agents, {args.envs_per_actor} copies '
         f'per actor, {os.cpu_count()} CPUs; raw {raw:.0f} control steps/s '
         'on one core')
@@ -235,9 +258,10 @@ def main(argv=None):
       ('env + lower layer, lockstep / raw', single['lockstep'], '>= 0.70'),
       ('env + lower layer, copy by copy / raw', single['copy_by_copy'], ''),
   ]
-  for n, (rate, _) in pipelines.items():
+  for n, (rate, _, own_rate) in pipelines.items():
     lines.append((f'pipeline, {n} actor{"s" * (n > 1)} / ({n} x raw)',
                   rate / (n * raw), '>= 0.60' if n == 2 else ''))
+    lines.append((f'  an actor\'s own rollout / raw', own_rate / raw, ''))
   most = max(pipelines)
   lines.append((f"learner's share of a {most}-actor update",
                 pipelines[most][1], ''))
