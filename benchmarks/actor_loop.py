@@ -3,8 +3,9 @@
     python benchmarks/actor_loop.py [--rounds 4]
 
 Transport with 4 Ants and the training defaults (16 copies, 32 commands a
-rollout, the shipped lower layer). A `RolloutWorker` here (pinned to one
-core, the actors' single-threaded settings) and one as a Ray actor
+rollout, the shipped lower layer). A `RolloutWorker` here (this thread
+pinned to one core once Ray has started, the actors' single-threaded
+settings) and one as a Ray actor (not pinned)
 (`actor_pool.RayPool`) collect in turn with the same variables, a fresh
 learner's and then, each round, those after one learner step on the Ray
 actor's rollout. Prints env steps/s per round and the medians:
@@ -60,12 +61,20 @@ def main(argv=None):
   local = rollout.RolloutWorker(spec, config, 0, 0, copies)
   actor_pool.init_ray(num_cpus=max(2, os.cpu_count()))
   pool = actor_pool.RayPool(spec, config, copies, [0])
-  os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[-1]})
-  local.collect(fresh, 0)  # Start-up and compilation, both.
-  pool.collect(fresh, 0)
+  try:
+    os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[-1]})
+    local.collect(fresh, 0)  # Start-up and compilation, both.
+    pool.collect(fresh, 0)
+    _rounds(args.rounds, local, pool, fresh, learners, variables)
+  finally:
+    pool.close()
+
+
+def _rounds(rounds, local, pool, fresh, learners, variables):
+  """Alternates the two workers; prints each round and the medians."""
   out = {k: [] for k in ('local_v0', 'ray_v0_own', 'ray_v0_driver',
                          'local_trained', 'ray_trained_own')}
-  for r in range(args.rounds):
+  for r in range(rounds):
     begin = time.perf_counter()
     result = local.collect(fresh, 1)
     out['local_v0'].append(result.env_steps / (time.perf_counter() - begin))
@@ -85,7 +94,6 @@ def main(argv=None):
     out['ray_trained_own'].append(result.env_steps / result.seconds)
     print(r, {k: round(v[-1]) for k, v in out.items()}, flush=True)
   print('median', {k: round(float(np.median(v))) for k, v in out.items()})
-  pool.close()
 
 
 if __name__ == '__main__':

@@ -261,7 +261,7 @@ def main(argv=None):
   for n, (rate, _, own_rate) in pipelines.items():
     lines.append((f'pipeline, {n} actor{"s" * (n > 1)} / ({n} x raw)',
                   rate / (n * raw), '>= 0.60' if n == 2 else ''))
-    lines.append((f'  an actor\'s own rollout / raw', own_rate / raw, ''))
+    lines.append(("  an actor's own rollout / raw", own_rate / raw, ''))
   most = max(pipelines)
   lines.append((f"learner's share of a {most}-actor update",
                 pipelines[most][1], ''))

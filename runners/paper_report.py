@@ -291,11 +291,10 @@ def report(args: paper.PaperArgs, plan=None) -> str:
               'Each stage model on its own stage\'s task (transport\'s push '
               'stage: the task without the agent-target term; the '
               'ravine\'s pushers stage: the stone in front of the crossers\' '
-              'markers; its crossers stage: no pushers and the stone '
-              'across a crosser\'s path in half of the episodes, where the '
-              'paper\'s reward teaches walking to the finish line and '
-              'stopping at the edge where the stone is not), final '
-              'checkpoints. '
+              'markers; its crossers stage: no pushers, the stone across '
+              'a crosser\'s path in half of the episodes, the crossers paid '
+              'for nearing the finish line and penalised for falling in), '
+              'final checkpoints. '
               'The joint runs above start from them; the paper reports no '
               'stage figures.', '',
               *_header(['task', 'variant', 'stage', 'population',
