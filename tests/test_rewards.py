@@ -236,10 +236,31 @@ def _first_crosser_into_the_trench(env):
 
 def test_ravine_all_rule_fails_when_one_crosser_falls():
   for rule, ends in (("all", True), ("any", False)):
-    env = coop_suite.load("ravine", 2, stage="crossers", seed=0, success=rule)
+    env = coop_suite.load("ravine", 2, seed=0, success=rule)
     timestep = _first_crosser_into_the_trench(env)
     assert timestep.last() is ends, rule
     assert env.episode_metrics()["failure"] is ends, rule
+
+
+def test_ravine_crossers_stage_a_fallen_crosser_is_out_and_the_other_goes_on():
+  env = coop_suite.load("ravine", 2, stage="crossers", seed=0)
+  timestep = _first_crosser_into_the_trench(env)
+  assert not timestep.last()
+  assert env.episode_metrics()["failure"] is False
+  assert timestep.reward[0] < -15.0  # The fall, once (-20 + 1.25).
+  timestep = env.step(_zeros(env))
+  # Out: nothing more, not even the destination term from the trench,
+  # which pays more than standing where the other crosser stands.
+  assert timestep.reward[0] == 0.0
+  assert timestep.reward[1] > 0.5
+  task, physics = env.task, env.physics
+  stone_y = task.stone.position(physics)[1]
+  y = stone_y + 4.0 if stone_y < 0 else stone_y - 4.0
+  layouts.place(task.walkers[1], physics, [task.arena.ravine_x, y + 1.0],
+                0.0, np.random.RandomState(0), ground_z=-task.arena.depth)
+  timestep = env.step(_zeros(env))
+  assert timestep.last() and float(timestep.discount) == 0.0
+  assert env.episode_metrics()["failure"] is True
 
 
 def test_ravine_refuses_unknown_success_rule():

@@ -12,7 +12,8 @@ Ravine Bridging"), selected with `stage`:
 * 'crossers': only the crossers act, the stone lies across one crosser's
   path in half of the episodes (`stone_in_path_probability`), anywhere
   otherwise; crossers are paid 5 / (1 + |finish_x - x|) and -20 once if
-  they fall in.
+  they fall in. A fallen crosser is out (paid nothing more) and the others
+  go on: the episode fails when every crosser has fallen.
 * 'joint': everybody acts; both shaping terms stay on and success pays +50
   to all agents (and ends the episode with `end_on_success`).
 
@@ -55,8 +56,10 @@ class RavineConfig(base.TaskConfig):
   """Joint stage: paid to all agents on success."""
   success: str = "all"
   """'all': success when every crosser has passed the finish line, failure
-  (the episode ends) once one has fallen in; 'any': success when one crosser
-  has passed it, failure once all have fallen in."""
+  (the episode ends) once one has fallen in (in the crossers stage once all
+  have); 'any': success when one crosser has passed it, failure once all
+  have fallen in. A fallen crosser earns no destination reward after its
+  fall."""
   width: float = 2.0
   """Trench width (m)."""
   depth: float = 1.0
@@ -123,6 +126,7 @@ class Ravine(base.CoopTask):
     self._fallen = np.zeros(self.n_agents, dtype=bool)
     self._crossed = np.zeros(self.n_agents, dtype=bool)
     self._fall_term = np.zeros(self.n_agents)
+    self._out = np.zeros(self.n_agents, dtype=bool)
     self._markers = np.zeros((n_agents, 2))
     # `measure`'s arguments after the stone (the arena does not move).
     self._geometry = (
@@ -159,6 +163,7 @@ class Ravine(base.CoopTask):
     self._fallen = np.zeros(self.n_agents, dtype=bool)
     self._crossed = np.zeros(self.n_agents, dtype=bool)
     self._fall_term = np.zeros(self.n_agents)
+    self._out = np.zeros(self.n_agents, dtype=bool)
     half = cfg.length / 2 - cfg.stone_length / 2 - 2.0
     stone_y = random_state.uniform(-half, half)
     line_half = max(0.0, cfg.length / 2 - 2.0
@@ -195,6 +200,7 @@ class Ravine(base.CoopTask):
                     random_state, ground_z=-cfg.depth)
 
   def _update_status(self, physics):
+    self._out = self._fallen.copy()  # Fell at an earlier step.
     self._fall_term = update_falls(
         self.frames(physics).packed, self._is_crosser, self._fallen,
         self._crossed, self._arena.finish_x, _FALLEN_HEIGHT,
@@ -206,9 +212,16 @@ class Ravine(base.CoopTask):
     fallen = self._fallen[self._is_crosser]
     if self._config.success == "all":
       self._success = bool(crossed.all())
-      self._failure = bool(fallen.any())
     else:
       self._success = bool(crossed.any())
+    # A fall ends the episode for everybody under 'all', except in the
+    # crossers stage: there a fallen crosser is out and the others go on.
+    # (With one policy for both crossers, a partner walking into the trench
+    # beside the stone ended the episode before the crosser on the stone
+    # reached the finish line: no crossing was ever seen.)
+    if self._config.success == "all" and self.stage != "crossers":
+      self._failure = bool(fallen.any())
+    else:
       self._failure = bool(fallen.all())
 
   def _reward_terms(self, physics):
@@ -217,7 +230,9 @@ class Ravine(base.CoopTask):
     if self.stage in ("pushers", "joint"):
       terms["bridge"] = shaping[0]
     if self.stage in ("crossers", "joint"):
-      terms["destination"] = shaping[1]
+      # A crosser that has fallen in earns nothing more (the paper's
+      # "death"); where a fall ends the episode this changes nothing.
+      terms["destination"] = np.where(self._out, 0.0, shaping[1])
       terms["fall"] = self._fall_term
     if self.stage == "joint":
       terms["success"] = self.each_agent(
