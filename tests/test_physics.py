@@ -133,6 +133,23 @@ def test_crossers_stage_puts_the_stone_in_a_crossers_path_as_often_as_asked():
   assert 0 < near(default) < len(default)
 
 
+def test_crossers_stage_starts_crossers_at_the_edge_as_often_as_asked():
+  env = coop_suite.load("ravine", 2, stage="crossers", seed=3,
+                        edge_start_probability=1.0)
+  edge, (low, high) = (env.task.arena.near_edge_x,
+                       env.task._config.edge_start_distance)
+  for _ in range(6):
+    env.reset()
+    for walker in env.task.walkers:
+      gap = edge - walker.torso_position(env.physics)[0]
+      assert low - 0.05 <= gap <= high + 0.05, gap
+  env.close()
+  starts, cfg = _ravine_starts("crossers", episodes=24,
+                               edge_start_probability=0.0)
+  gaps = [edge - x for _, _, xy in starts for x in xy[:, 0]]
+  assert min(gaps) >= cfg.start_gap - 0.05  # 2-3 m back, as before.
+
+
 def test_stone_in_path_leaves_the_other_stages_episodes_unchanged():
   for stage in ("joint", "pushers"):
     starts = [_ravine_starts(stage, episodes=4, stone_in_path_probability=p)[0]

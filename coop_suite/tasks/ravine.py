@@ -11,9 +11,11 @@ Ravine Bridging"), selected with `stage`:
   5 / (1 + |stone_y - y of the crosser nearest the ravine|).
 * 'crossers': only the crossers act, the stone lies across one crosser's
   path in half of the episodes (`stone_in_path_probability`), anywhere
-  otherwise; crossers are paid 5 / (1 + |finish_x - x|) and -20 once if
-  they fall in. A fallen crosser is out (paid nothing more) and the others
-  go on: the episode fails when every crosser has fallen.
+  otherwise, and each crosser starts 0.5-1.5 m before the edge in half of
+  the episodes (`edge_start_probability`); crossers are paid
+  5 / (1 + |finish_x - x|) and -20 once if they fall in. A fallen crosser
+  is out (paid nothing more) and the others go on: the episode fails when
+  every crosser has fallen.
 * 'joint': everybody acts; both shaping terms stay on and success pays +50
   to all agents (and ends the episode with `end_on_success`).
 
@@ -88,6 +90,15 @@ class RavineConfig(base.TaskConfig):
   stone_in_path_distance: float = 0.3
   """Crossers stage: largest |stone_y - the crosser's y| (m) of a stone
   placed in its path."""
+  edge_start_probability: float = 0.5
+  """Crossers stage: how often each crosser starts `edge_start_distance`
+  before the near edge instead of `start_gap` + 0-1 m (drawn for each
+  crosser alone, so a crosser at the edge has the stone in front in some
+  episodes and not in others). From 2-3 m back, crossers learned to hold
+  before the edge long before a crossing was ever seen."""
+  edge_start_distance: tuple = (0.5, 1.5)
+  """Crossers stage: range of a crosser's distance (m) from the near edge
+  when it starts there (the oracle waits 0.9 m before it)."""
 
 
 class Ravine(base.CoopTask):
@@ -183,6 +194,11 @@ class Ravine(base.CoopTask):
       stone_y = np.clip(served + random_state.uniform(
           -cfg.stone_in_path_distance, cfg.stone_in_path_distance),
           -end, end)
+    if self.stage == "crossers" and cfg.edge_start_probability > 0:
+      at_edge = (random_state.uniform(size=self._n_markers)
+                 < cfg.edge_start_probability)
+      crossers[at_edge, 0] = arena.near_edge_x - random_state.uniform(
+          *cfg.edge_start_distance, size=int(at_edge.sum()))
     layouts.place_prop(self.stone, physics,
                        [arena.ravine_x, stone_y, -cfg.depth / 2])
     walkers = iter(self._walkers)
