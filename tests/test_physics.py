@@ -135,7 +135,8 @@ def test_crossers_stage_puts_the_stone_in_a_crossers_path_as_often_as_asked():
 
 def test_crossers_stage_starts_crossers_at_the_edge_as_often_as_asked():
   env = coop_suite.load("ravine", 2, stage="crossers", seed=3,
-                        edge_start_probability=1.0)
+                        edge_start_probability=1.0,
+                        stone_start_probability=0.0)
   edge, (low, high) = (env.task.arena.near_edge_x,
                        env.task._config.edge_start_distance)
   for _ in range(6):
@@ -145,9 +146,26 @@ def test_crossers_stage_starts_crossers_at_the_edge_as_often_as_asked():
       assert low - 0.05 <= gap <= high + 0.05, gap
   env.close()
   starts, cfg = _ravine_starts("crossers", episodes=24,
-                               edge_start_probability=0.0)
+                               edge_start_probability=0.0,
+                               stone_start_probability=0.0)
   gaps = [edge - x for _, _, xy in starts for x in xy[:, 0]]
   assert min(gaps) >= cfg.start_gap - 0.05  # 2-3 m back, as before.
+
+
+def test_crossers_stage_starts_a_crosser_on_the_stone_as_often_as_asked():
+  env = coop_suite.load("ravine", 2, stage="crossers", seed=3,
+                        stone_in_path_probability=1.0,
+                        stone_start_probability=1.0)
+  arena = env.task.arena
+  for _ in range(6):
+    env.reset()
+    stone = env.task.stone.position(env.physics)
+    on = [w for w in env.task.walkers
+          if abs(w.torso_position(env.physics)[0] - arena.ravine_x) < 0.5]
+    assert len(on) == 1  # The one the stone is across the path of.
+    x, y, z = on[0].torso_position(env.physics)
+    assert abs(y - stone[1]) <= 0.3 + 1e-6 and z > 0.2  # On it, standing.
+  env.close()
 
 
 def test_stone_in_path_leaves_the_other_stages_episodes_unchanged():

@@ -11,11 +11,13 @@ Ravine Bridging"), selected with `stage`:
   5 / (1 + |stone_y - y of the crosser nearest the ravine|).
 * 'crossers': only the crossers act, the stone lies across one crosser's
   path in half of the episodes (`stone_in_path_probability`), anywhere
-  otherwise, and each crosser starts 0.5-1.5 m before the edge in half of
-  the episodes (`edge_start_probability`); crossers are paid
-  5 / (1 + |finish_x - x|) and -20 once if they fall in. A fallen crosser
-  is out (paid nothing more) and the others go on: the episode fails when
-  every crosser has fallen.
+  otherwise; each crosser starts 0.5-1.5 m before the edge in half of the
+  episodes (`edge_start_probability`), and in 30% of the episodes with the
+  stone across a crosser's path that crosser starts on the stone
+  (`stone_start_probability`). Crossers are paid 5 / (1 + |finish_x - x|)
+  and -20 once if they fall in. A fallen crosser is out (paid nothing
+  more) and the others go on: the episode fails when every crosser has
+  fallen.
 * 'joint': everybody acts; both shaping terms stay on and success pays +50
   to all agents (and ends the episode with `end_on_success`).
 
@@ -99,6 +101,12 @@ class RavineConfig(base.TaskConfig):
   edge_start_distance: tuple = (0.5, 1.5)
   """Crossers stage: range of a crosser's distance (m) from the near edge
   when it starts there (the oracle waits 0.9 m before it)."""
+  stone_start_probability: float = 0.3
+  """Crossers stage: how often the crosser whose path the stone is across
+  starts on the stone instead (within 0.4 m of the trench's middle), from
+  where walking on crosses: a reverse curriculum, since crossing from the
+  edge takes ~10 consecutive forward commands that sampled commands never
+  strung together (no crossing in 1M steps with crossers at the edge)."""
 
 
 class Ravine(base.CoopTask):
@@ -186,9 +194,11 @@ class Ravine(base.CoopTask):
     self._markers = crossers
     # Drawn in the crossers stage alone: the other stages' episodes stay
     # those of their seeds.
+    in_path = None  # The crosser whose path the stone is across.
     if (self.stage == "crossers" and cfg.stone_in_path_probability > 0
         and random_state.uniform() < cfg.stone_in_path_probability):
-      served = crossers[random_state.randint(self._n_markers), 1]
+      in_path = random_state.randint(self._n_markers)
+      served = crossers[in_path, 1]
       # Clear of the trench's end walls (crossers start up to 6 m out).
       end = cfg.length / 2 - cfg.stone_length / 2 - 0.2
       stone_y = np.clip(served + random_state.uniform(
@@ -199,6 +209,10 @@ class Ravine(base.CoopTask):
                  < cfg.edge_start_probability)
       crossers[at_edge, 0] = arena.near_edge_x - random_state.uniform(
           *cfg.edge_start_distance, size=int(at_edge.sum()))
+    if (in_path is not None and cfg.stone_start_probability > 0
+        and random_state.uniform() < cfg.stone_start_probability):
+      # On the stone, its y already within stone_in_path_distance of it.
+      crossers[in_path, 0] = arena.ravine_x + random_state.uniform(-0.4, 0.4)
     layouts.place_prop(self.stone, physics,
                        [arena.ravine_x, stone_y, -cfg.depth / 2])
     walkers = iter(self._walkers)
