@@ -97,7 +97,8 @@ class RavineConfig(base.TaskConfig):
   before the near edge instead of `start_gap` + 0-1 m (drawn for each
   crosser alone, so a crosser at the edge has the stone in front in some
   episodes and not in others). From 2-3 m back, crossers learned to hold
-  before the edge long before a crossing was ever seen."""
+  before the edge long before a crossing was ever seen; with these starts
+  they still did not cross (docs/results.md)."""
   edge_start_distance: tuple = (0.5, 1.5)
   """Crossers stage: range of a crosser's distance (m) from the near edge
   when it starts there (the oracle waits 0.9 m before it)."""
@@ -106,7 +107,11 @@ class RavineConfig(base.TaskConfig):
   starts on the stone instead (within 0.4 m of the trench's middle), from
   where walking on crosses: a reverse curriculum, since crossing from the
   edge takes ~10 consecutive forward commands that sampled commands never
-  strung together (no crossing in 1M steps with crossers at the edge)."""
+  strung together (no crossing in 1M steps with crossers at the edge).
+  Unproven: with it the stage still did not cross in 1.3M steps, its
+  sampled commands carrying crossers off the stone's ends
+  (docs/results.md). A fallen crosser stays in the trench, where it can
+  push the stone."""
 
 
 class Ravine(base.CoopTask):
