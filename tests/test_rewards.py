@@ -256,7 +256,8 @@ def test_ravine_crossers_stage_a_fallen_crosser_is_out_and_the_other_goes_on():
   task, physics = env.task, env.physics
   stone_y = task.stone.position(physics)[1]
   y = stone_y + 4.0 if stone_y < 0 else stone_y - 4.0
-  layouts.place(task.walkers[1], physics, [task.arena.ravine_x, y + 1.0],
+  y += 2.0 if stone_y < 0 else -2.0  # Clear of the first, away from the stone.
+  layouts.place(task.walkers[1], physics, [task.arena.ravine_x, y],
                 0.0, np.random.RandomState(0), ground_z=-task.arena.depth)
   timestep = env.step(_zeros(env))
   assert timestep.last() and float(timestep.discount) == 0.0

@@ -17,7 +17,8 @@ Ravine Bridging"), selected with `stage`:
   (`stone_start_probability`). Crossers are paid 5 / (1 + |finish_x - x|)
   and -20 once if they fall in. A fallen crosser is out (paid nothing
   more) and the others go on: the episode fails when every crosser has
-  fallen.
+  fallen (with `success='all'` one that had a fall cannot succeed;
+  `crossed` counts the crossings).
 * 'joint': everybody acts; both shaping terms stay on and success pays +50
   to all agents (and ends the episode with `end_on_success`).
 
