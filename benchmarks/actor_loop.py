@@ -51,12 +51,7 @@ def main(argv=None):
   layout, *_ = learner_loop.probe(spec, config)
   learners = learner_loop.make_learners(config, layout)
 
-  def variables():
-    return {name: dict(zip(rollout.VARIABLE_NAMES, jax.device_get(
-        learner.get_variables(rollout.VARIABLE_NAMES))))
-            for name, learner in learners.items()}
-
-  fresh = variables()
+  fresh = learner_loop.actor_variables(learners)
   copies = train_args.envs_per_actor
   local = rollout.RolloutWorker(spec, config, 0, 0, copies)
   actor_pool.init_ray(num_cpus=max(2, os.cpu_count()))
@@ -65,12 +60,12 @@ def main(argv=None):
     os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[-1]})
     local.collect(fresh, 0)  # Start-up and compilation, both.
     pool.collect(fresh, 0)
-    _rounds(args.rounds, local, pool, fresh, learners, variables)
+    _rounds(args.rounds, local, pool, fresh, learners)
   finally:
     pool.close()
 
 
-def _rounds(rounds, local, pool, fresh, learners, variables):
+def _rounds(rounds, local, pool, fresh, learners):
   """Alternates the two workers; prints each round and the medians."""
   out = {k: [] for k in ('local_v0', 'ray_v0_own', 'ray_v0_driver',
                          'local_trained', 'ray_trained_own')}
@@ -85,7 +80,7 @@ def _rounds(rounds, local, pool, fresh, learners, variables):
     out['ray_v0_driver'].append(result.env_steps / seen)
     for name, learner in learners.items():
       jax.device_get(learner.step(types.concatenate([result.batches[name]])))
-    trained = variables()
+    trained = learner_loop.actor_variables(learners)
     begin = time.perf_counter()
     result = local.collect(trained, 1)
     out['local_trained'].append(result.env_steps

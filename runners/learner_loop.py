@@ -144,6 +144,14 @@ def train(args: config_lib.TrainArgs,
         ray.shutdown()
 
 
+def actor_variables(learners) -> dict[str, dict[str, Any]]:
+  """What the actors act with: {species: {variable name: numpy pytree}}
+  of each learner's `rollout.VARIABLE_NAMES`."""
+  return {name: dict(zip(rollout.VARIABLE_NAMES, jax.device_get(
+      learner.get_variables(rollout.VARIABLE_NAMES))))
+          for name, learner in learners.items()}
+
+
 def make_learners(config, layout) -> dict[str, Any]:
   """A fresh learner per species: {species name: HierarchyLearner}."""
   learners = {}
@@ -251,9 +259,7 @@ def _train(args, checkpoint, on_update, deadline):
     with run_dir.GracefulStop(deadline) as stop:
       while counters['update'] < updates and not stop.requested:
         tick = time.perf_counter()
-        variables = {name: dict(zip(rollout.VARIABLE_NAMES, jax.device_get(
-            learner.get_variables(rollout.VARIABLE_NAMES))))
-                     for name, learner in learners.items()}
+        variables = actor_variables(learners)
         results = pool.collect(variables, counters['update'])
         collected = time.perf_counter()
         assert all(r.update == counters['update'] for r in results)

@@ -198,27 +198,8 @@ class Ravine(base.CoopTask):
                             random_state.uniform(-line_half, line_half))
     crossers[:, 0] -= random_state.uniform(0, 1.0, self._n_markers)
     self._markers = crossers
-    # Drawn in the crossers stage alone: the other stages' episodes stay
-    # those of their seeds.
-    in_path = None  # The crosser whose path the stone is across.
-    if (self.stage == "crossers" and cfg.stone_in_path_probability > 0
-        and random_state.uniform() < cfg.stone_in_path_probability):
-      in_path = random_state.randint(self._n_markers)
-      served = crossers[in_path, 1]
-      # Clear of the trench's end walls (crossers start up to 6 m out).
-      end = cfg.length / 2 - cfg.stone_length / 2 - 0.2
-      stone_y = np.clip(served + random_state.uniform(
-          -cfg.stone_in_path_distance, cfg.stone_in_path_distance),
-          -end, end)
-    if self.stage == "crossers" and cfg.edge_start_probability > 0:
-      at_edge = (random_state.uniform(size=self._n_markers)
-                 < cfg.edge_start_probability)
-      crossers[at_edge, 0] = arena.near_edge_x - random_state.uniform(
-          *cfg.edge_start_distance, size=int(at_edge.sum()))
-    if (in_path is not None and cfg.stone_start_probability > 0
-        and random_state.uniform() < cfg.stone_start_probability):
-      # On the stone, its y already within stone_in_path_distance of it.
-      crossers[in_path, 0] = arena.ravine_x + random_state.uniform(-0.4, 0.4)
+    if self.stage == "crossers":
+      stone_y = self._crossers_stage_starts(crossers, stone_y, random_state)
     layouts.place_prop(self.stone, physics,
                        [arena.ravine_x, stone_y, -cfg.depth / 2])
     walkers = iter(self._walkers)
@@ -234,6 +215,32 @@ class Ravine(base.CoopTask):
       layouts.place(walker, physics, [arena.ravine_x, y],
                     -side * np.pi / 2 + random_state.uniform(-0.3, 0.3),
                     random_state, ground_z=-cfg.depth)
+
+  def _crossers_stage_starts(self, crossers, stone_y, random_state):
+    """The crossers stage's own starts (see `RavineConfig`): moves
+    `crossers` [n, 2] in place and returns the stone's y. Drawn in this
+    stage alone: the other stages' episodes stay those of their seeds."""
+    cfg = self._config
+    arena = self._arena
+    in_path = None  # The crosser whose path the stone is across.
+    if (cfg.stone_in_path_probability > 0
+        and random_state.uniform() < cfg.stone_in_path_probability):
+      in_path = random_state.randint(self._n_markers)
+      # Clear of the trench's end walls (crossers start up to 6 m out).
+      end = cfg.length / 2 - cfg.stone_length / 2 - 0.2
+      stone_y = np.clip(crossers[in_path, 1] + random_state.uniform(
+          -cfg.stone_in_path_distance, cfg.stone_in_path_distance),
+          -end, end)
+    if cfg.edge_start_probability > 0:
+      at_edge = (random_state.uniform(size=self._n_markers)
+                 < cfg.edge_start_probability)
+      crossers[at_edge, 0] = arena.near_edge_x - random_state.uniform(
+          *cfg.edge_start_distance, size=int(at_edge.sum()))
+    if (in_path is not None and cfg.stone_start_probability > 0
+        and random_state.uniform() < cfg.stone_start_probability):
+      # On the stone, its y already within stone_in_path_distance of it.
+      crossers[in_path, 0] = arena.ravine_x + random_state.uniform(-0.4, 0.4)
+    return stone_y
 
   def _update_status(self, physics):
     self._out = self._fallen.copy()  # Fell at an earlier step.
