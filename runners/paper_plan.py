@@ -32,6 +32,11 @@ about 2.6 h on the 2-core development machine). One cell's, except on
 transport, whose push stage takes `PUSH_BUDGET` of it."""
 STAGE_BUDGET = 10_000_000
 """Environment steps of each of the ravine's two pretraining stages."""
+CROSSERS_FLAGS = (('initial_action_std', 0.25),)
+"""The ravine's crossers stage's own training flags: its commands start with
+a std of 0.25 pre-tanh, not the default ~0.79, which carried every crosser
+off the stone's ends before it could learn to walk along it
+(docs/results.md, "Ravine, seed 0")."""
 PUSH_BUDGET = 3_000_000
 """Environment steps of transport's push stage, taken from the model's
 `BUDGET`: a transport model trains 15M steps in all (push 3M, then the
@@ -154,8 +159,10 @@ def trained(experiment, task, agent, n_agents, seed, zero_shot=(),
   if task != 'ravine':
     return [Cell(experiment, task, agent, n_agents, seed, budget,
                  zero_shot=zero_shot, flags=flags)]
+  crossers = CROSSERS_FLAGS if agent != 'flat' else ()  # 'flat': no commands.
   stages = [Cell(experiment, task, agent, n_agents, seed, STAGE_BUDGET,
-                 stage=stage, flags=flags) for stage in ('pushers', 'crossers')]
+                 stage=stage, flags=flags + extra)
+            for stage, extra in (('pushers', ()), ('crossers', crossers))]
   joint = Cell(experiment, task, agent, n_agents, seed, budget,
                init_from=(('pusher', stages[0].name),
                           ('crosser', stages[1].name)),

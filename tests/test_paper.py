@@ -9,6 +9,7 @@ import signal
 import imageio
 import pytest
 
+from agents.hierarchy import config as hierarchy_config
 from runners import actor_pool
 from runners import checkpoints
 from runners import cli
@@ -274,6 +275,15 @@ def test_the_plan_is_the_papers():
       (species, push), = joint.init_from
       assert species == 'ant' and by_name[push].stage == 'push'
       assert joint.budget + by_name[push].budget == paper_plan.BUDGET
+  for cell in plan:  # The crossers' commands start with a small std.
+    flags = dict(cell.flags)
+    if cell.stage == 'crossers' and cell.agent != 'flat':
+      assert paper.train_args(cell, paper.PaperArgs()).hierarchy == (
+          dataclasses.replace(hierarchy_config.HierarchyConfig(
+              agent=cell.agent, seed=cell.seed), **dict(
+                  paper_plan.CROSSERS_FLAGS)))
+    else:
+      assert 'initial_action_std' not in flags, cell.name
   ablations = [c for c in plan if c.agent in ('flat', 'no_memory')]
   assert {c.seed for c in ablations} == {0, 1, 2}
   assert [c.agent for c in plan[:len(hrl) + 10]].count('flat') == 0

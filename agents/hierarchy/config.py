@@ -81,6 +81,15 @@ class HierarchyConfig:
   """Floor of the command's std in pre-tanh units (softplus(s) + floor):
   the policy's sensitivity to a parameter step grows as 1 / std, so a
   collapsing std made every update larger. Evaluation acts with the mean."""
+  initial_action_std: float = fields.field(
+      0.0, fields.equal(0, 'softplus(0) + min_action_std') | fields.POSITIVE)
+  """The command's std at initialisation, pre-tanh (> min_action_std);
+  0 keeps the default softplus(0) + min_action_std ~= 0.79 (~1.7 m a
+  command at the ravine). The ravine's crossers stage starts smaller: its
+  fresh policy's default noise carried every crosser off the stone's ends
+  before it could reach the finish, so retreat was learned, never crossing
+  (docs/results.md). State-independent std only (`state_dependent_std`
+  False); the learned std then moves as usual."""
   value_cost: float = fields.field(0.5, fields.NON_NEGATIVE)
   """Weight of the value loss 0.5 * (target - value)^2, in normalised units
   when `normalize_values`."""
@@ -134,7 +143,8 @@ class HierarchyConfig:
   """False: the action std is a learned parameter vector, the same for every
   state (PureJaxRL); exploration then cannot collapse in some states while
   the value is still poor. True: the head outputs it (Brax). Both start at
-  softplus(0) + 1e-3 ~= 0.69 in pre-tanh units. Always True for 'lowlevel':
+  softplus(0) + min_action_std ~= 0.79 in pre-tanh units (False: unless
+  `initial_action_std` says otherwise). Always True for 'lowlevel':
   a controller's policy outputs its std (`agents.networks.policy_value`)."""
 
   @property
@@ -186,3 +196,12 @@ class HierarchyConfig:
                  'flat_sizes'):
       object.__setattr__(self, name, tuple(getattr(self, name)))
     fields.check(self)
+    if self.initial_action_std:
+      if self.state_dependent_std:
+        raise ValueError('--initial-action-std needs a state-independent std '
+                         '(--no-state-dependent-std; the head outputs it '
+                         f'otherwise), got agent={self.agent!r}.')
+      if self.initial_action_std <= self.min_action_std:
+        raise ValueError(
+            f'--initial-action-std must be > --min-action-std '
+            f'({self.min_action_std}), got {self.initial_action_std}.')

@@ -5,6 +5,7 @@ steps with T = 1; the learner replays whole sequences with T > 1. Because
 both run this one module, acting and learning see the same function.
 """
 import functools
+import math
 from typing import Optional
 
 import flax.linen as nn
@@ -17,6 +18,15 @@ from agents.networks import mlp
 # A small last layer starts the policy close to its prior, whatever the input
 # (as `agents.networks.policy_value` does for the lower layer).
 _POLICY_HEAD_SCALE = 0.01
+
+
+def _raw_scale_init(config: hierarchy_config.HierarchyConfig):
+  """Initialiser of the state-independent pre-softplus scale: zeros, or the
+  inverse softplus of `initial_action_std - min_action_std`."""
+  if not config.initial_action_std:
+    return nn.initializers.zeros
+  excess = config.initial_action_std - config.min_action_std
+  return nn.initializers.constant(math.log(math.expm1(excess)))
 
 
 class ResettingGRUCell(nn.Module):
@@ -138,7 +148,7 @@ class HierarchyPolicyValue(nn.Module):
       dist_params = policy_out
     else:
       # Pre-softplus scale, learned but shared by all states (see config).
-      raw_scale = self.param('raw_scale', nn.initializers.zeros,
+      raw_scale = self.param('raw_scale', _raw_scale_init(config),
                              (self.action_size,))
       dist_params = jnp.concatenate(
           [policy_out, jnp.broadcast_to(raw_scale, policy_out.shape)], -1)

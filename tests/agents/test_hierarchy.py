@@ -215,6 +215,36 @@ def test_bad_batches_and_configs_are_rejected_with_clear_errors():
     learner.step()
 
 
+@pytest.mark.parametrize('initial_std', [0.0, 0.25])
+def test_the_command_std_starts_where_the_config_says(initial_std):
+  config = hierarchy_config.HierarchyConfig(
+      **SMALL, initial_action_std=initial_std)
+  networks = hierarchy_builder.HierarchyBuilder(config).make_networks(
+      OBS_DIM, 2, GLOBAL_DIM)
+  params = networks.init(jax.random.PRNGKey(3))
+  observation = jnp.asarray(np.random.default_rng(0).normal(
+      size=(T, B, OBS_DIM)), jnp.float32)
+  _, dist_params, _ = networks.unroll(
+      params, networks.initial_carry(B), observation,
+      jnp.zeros((T, B), bool))
+  _, scale = networks.distribution.loc_and_scale(dist_params)
+  # 0 keeps the default: a zero pre-softplus scale, softplus(0) + floor.
+  expected = initial_std or np.log(2) + config.min_action_std
+  np.testing.assert_allclose(scale, expected, rtol=1e-6)
+  if not initial_std:
+    assert not np.any(params['params']['raw_scale'])
+
+
+def test_an_initial_std_the_config_cannot_start_from_is_refused():
+  with pytest.raises(ValueError, match='must be > --min-action-std'):
+    hierarchy_config.HierarchyConfig(initial_action_std=0.05)
+  with pytest.raises(ValueError, match='needs a state-independent std'):
+    hierarchy_config.HierarchyConfig(initial_action_std=0.5,
+                                     state_dependent_std=True)
+  with pytest.raises(ValueError, match='initial-action-std'):
+    hierarchy_config.HierarchyConfig(initial_action_std=-1.0)
+
+
 def test_hrl_remembers_a_cue_it_no_longer_sees():
   """Memory sanity check: a cue shown at the first of 3 commands is rewarded
   at the last, when the observation is 0. A memoryless policy earns 0 in
