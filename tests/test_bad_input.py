@@ -47,7 +47,9 @@ def test_unknown_option_names_the_allowed_ones():
     (("transport", 2), {"stage": "pushers"}, ValueError),
     (("ravine", 2), {"n_pushers": 0}, ValueError),
     (("transport", 2), {"time_limit": -1.0}, ValueError),
-    (("transport", 2), {"seed": 1.5}, TypeError)])
+    (("transport", 2), {"seed": 1.5}, TypeError),
+    # Longer than the plane: once clipped silently, the layout using it.
+    (("ravine", 2), {"length": 30.0}, ValueError)])
 def test_check_options_raises_what_load_raises(args, kwargs, error):
   with pytest.raises(error) as from_load:
     coop_suite.load(*args, **kwargs)

@@ -31,7 +31,12 @@ class RavineArena(floor.Floor):
     """
     self.width = width
     self.depth = depth
-    self.length = min(length, 2 * size[1])
+    if not 0 < length <= 2 * size[1]:
+      # Clipping it would leave the task's layout (stone, pushers) using
+      # the length asked for, beyond the trench's closed ends.
+      raise ValueError(f"The ravine's length must be in (0, {2 * size[1]:g}] "
+                       f"(the plane's extent along y), got {length!r}.")
+    self.length = length
     self.ravine_x = ravine_x
     self.near_edge_x = ravine_x - width / 2
     self.far_edge_x = ravine_x + width / 2
