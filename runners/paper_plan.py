@@ -34,9 +34,11 @@ STAGE_BUDGET = 10_000_000
 """Environment steps of each of the ravine's two pretraining stages."""
 CROSSERS_FLAGS = (('initial_action_std', 0.25),)
 """The ravine's crossers stage's own training flags: its commands start with
-a std of 0.25 pre-tanh, not the default ~0.79, which carried every crosser
-off the stone's ends before it could learn to walk along it
-(docs/results.md, "Ravine, seed 0")."""
+a std of 0.25 pre-tanh (~0.75 m), not the default ~0.79 (~1.7 m), which
+around a fresh policy's ~zero mean walked every crosser starting on the
+stone off its ends (20 of 20 episodes). A crosser commanded towards the
+finish crosses with either (docs/results.md, "Ravine, seed 0"): a smaller
+start, not a proven need."""
 PUSH_BUDGET = 3_000_000
 """Environment steps of transport's push stage, taken from the model's
 `BUDGET`: a transport model trains 15M steps in all (push 3M, then the

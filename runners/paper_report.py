@@ -292,8 +292,10 @@ def report(args: paper.PaperArgs, plan=None) -> str:
               'stage: the task without the agent-target term; the '
               'ravine\'s pushers stage: the stone in front of the crossers\' '
               'markers; its crossers stage: no pushers, the stone across '
-              'a crosser\'s path in half of the episodes, the crossers paid '
-              'for nearing the finish line and penalised for falling in), '
+              'a crosser\'s path in half of the episodes, that crosser '
+              'starting on the stone or past it in 70% of those, the '
+              'crossers paid for nearing the finish line and penalised '
+              'for falling in: docs/tasks.md), '
               'final checkpoints. '
               'The joint runs above start from them; the paper reports no '
               'stage figures.', '',

@@ -85,11 +85,11 @@ class HierarchyConfig:
       0.0, fields.equal(0, 'softplus(0) + min_action_std') | fields.POSITIVE)
   """The command's std at initialisation, pre-tanh (> min_action_std);
   0 keeps the default softplus(0) + min_action_std ~= 0.79 (~1.7 m a
-  command at the ravine). The ravine's crossers stage starts smaller: its
-  fresh policy's default noise carried every crosser off the stone's ends
-  before it could reach the finish, so retreat was learned, never crossing
-  (docs/results.md). State-independent std only (`state_dependent_std`
-  False); the learned std then moves as usual."""
+  command at the ravine). The ravine's crossers stage starts smaller
+  (`runners.paper_plan.CROSSERS_FLAGS`): around a fresh policy's ~zero
+  mean, the default noise walked crossers off the stone's ends.
+  State-independent std only (`state_dependent_std` False); the learned
+  std then moves as usual."""
   value_cost: float = fields.field(0.5, fields.NON_NEGATIVE)
   """Weight of the value loss 0.5 * (target - value)^2, in normalised units
   when `normalize_values`."""
