@@ -152,29 +152,30 @@ def test_crossers_stage_starts_crossers_at_the_edge_as_often_as_asked():
   assert min(gaps) >= cfg.start_gap - 0.05  # 2-3 m back, as before.
 
 
-def test_crossers_stage_starts_a_crosser_on_the_stone_as_often_as_asked():
+def test_crossers_stage_starts_a_crosser_near_the_stone_as_often_as_asked():
   env = coop_suite.load("ravine", 2, stage="crossers", seed=3,
                         stone_in_path_probability=1.0,
-                        stone_start_probability=1.0)
+                        stone_start_probability=1.0,
+                        edge_start_probability=0.0)  # The other: 2-3 m back.
   arena, cfg = env.task.arena, env.task._config
-  low, high = cfg.stone_start_distance
-  on_stone = past = 0
-  for _ in range(12):
+  low, high = cfg.stone_start_offset
+  kinds = set()
+  for _ in range(16):
     env.reset()
     stone = env.task.stone.position(env.physics)
-    ahead = [w for w in env.task.walkers
-             if w.torso_position(env.physics)[0] > arena.near_edge_x]
-    assert len(ahead) == 1  # The one the stone is across the path of.
-    x, y, _ = ahead[0].torso_position(env.physics)
+    near = [w for w in env.task.walkers
+            if w.torso_position(env.physics)[0] > arena.near_edge_x + low
+            - 0.05]
+    assert len(near) == 1  # The one the stone is across the path of.
+    x, y, _ = near[0].torso_position(env.physics)
     assert low - 0.05 <= x - arena.near_edge_x <= high + 0.05
     assert abs(y - stone[1]) <= cfg.stone_in_path_distance + 1e-6
-    on_stone += x < arena.far_edge_x
-    past += x > arena.far_edge_x
-    for _ in range(10):  # It stands there: the stone or the far side.
+    kinds.add(int(np.searchsorted([arena.near_edge_x, arena.far_edge_x], x)))
+    for _ in range(10):  # It stands there: ground, stone or far side.
       env.step(np.zeros((2, 8)))
-    assert ahead[0].torso_position(env.physics)[2] > 0.2
+    assert near[0].torso_position(env.physics)[2] > 0.2
     assert env.episode_metrics()["fallen"] == 0
-  assert on_stone and past  # (0.6, 3.0) m past the near edge: both.
+  assert kinds == {0, 1, 2}  # In front of the stone, on it, past it.
   env.close()
 
 

@@ -90,7 +90,8 @@ class TaskConfig:
     duration (`_POSITIVE`) must be > 0, one named after a speed, gap,
     tolerance, time or distance (`_NON_NEGATIVE`) >= 0, one named after a
     probability (`_UNIT`) in [0, 1], and a tuple named
-    after a distance or range is a (low, high) pair with low <= high.
+    after a distance, range or offset is a (low, high) pair with
+    low <= high.
     """
     name_of = type(self).__name__
     for field in dataclasses.fields(self):
@@ -110,7 +111,7 @@ _POSITIVE = ("timestep", "time_limit", "period", "spacing", "width",
              "memory_mb_per_agent", "k_neighbours", "height_grid")
 _NON_NEGATIVE = ("speed", "gap", "tolerance", "time", "distance", "range")
 _UNIT = ("probability",)  # In [0, 1].
-_RANGES = ("distance", "range")  # Tuples named so are (low, high).
+_RANGES = ("distance", "range", "offset")  # Tuples named so: (low, high).
 
 
 def _check_config_value(config_name, name, value, default):

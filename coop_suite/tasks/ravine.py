@@ -13,8 +13,9 @@ Ravine Bridging"), selected with `stage`:
   path in half of the episodes (`stone_in_path_probability`), anywhere
   otherwise; each crosser starts 0.5-1.5 m before the edge in half of the
   episodes (`edge_start_probability`), and in 70% of the episodes with the
-  stone across a crosser's path that crosser starts on the stone or past
-  it (`stone_start_probability`, `stone_start_distance`). Crossers are paid 5 / (1 + |finish_x - x|)
+  stone across a crosser's path that crosser starts in front of the
+  stone, on it or past it (`stone_start_probability`,
+  `stone_start_offset`). Crossers are paid 5 / (1 + |finish_x - x|)
   and -20 once if they fall in. A fallen crosser is out (paid nothing
   more) and the others go on: the episode fails when every crosser has
   fallen (with `success='all'` one that had a fall cannot succeed;
@@ -105,8 +106,8 @@ class RavineConfig(base.TaskConfig):
   when it starts there (the oracle waits 0.9 m before it)."""
   stone_start_probability: float = 0.7
   """Crossers stage: how often the crosser whose path the stone is across
-  starts on the stone or past it instead (`stone_start_distance`), from
-  where walking on crosses: a reverse curriculum, since crossing from the
+  starts just in front of the stone, on it or past it instead
+  (`stone_start_offset`): a reverse curriculum, since crossing from the
   edge takes ~10 consecutive forward commands that sampled commands never
   strung together (no crossing in 1M steps with crossers at the edge).
   With 0.3 (a crosser on the stone's middle in 15% of the episodes) the
@@ -114,14 +115,15 @@ class RavineConfig(base.TaskConfig):
   policy learned to hold ~1.4 m before the near edge and, on the stone,
   walked back to that (docs/results.md). A fallen crosser stays in the
   trench, where it can push the stone."""
-  stone_start_distance: tuple = (0.6, 3.0)
-  """Crossers stage: range of a stone start's distance past the near edge
-  (m): from 0.4 m before the stone's middle to 1 m past the far edge (the
-  trench is `width` wide, the finish line 2 m past the far edge). Past the
-  far edge walking back means falling in. With starts on the stone's
-  middle only (0.6-1.4 m) in 70% of the episodes with the stone in a path,
-  the policy still walked back off the stone, never crossing in 1.8M steps
-  (docs/results.md)."""
+  stone_start_offset: tuple = (-1.5, 3.0)
+  """Crossers stage: range of a stone start's x relative to the near edge
+  (m; negative before it): from 1.5 m before the edge, over the stone
+  (0 to `width`), to 1 m past the far edge (the finish line is 2 m past
+  it). Starting past the far edge, walking back means falling in. Starts
+  on the stone's middle only (0.6-1.4 m) left the policy walking back off
+  the stone (no crossing in 1.9M steps); from 0.6-3.0 m it crossed from
+  every such start within 1.7M steps, but never stepped onto the stone
+  from 0.5-1.5 m before the edge (docs/results.md)."""
 
 
 class Ravine(base.CoopTask):
@@ -250,7 +252,7 @@ class Ravine(base.CoopTask):
       # On the stone or past it, its y already within stone_in_path_distance
       # of the stone's.
       crossers[in_path, 0] = arena.near_edge_x + random_state.uniform(
-          *cfg.stone_start_distance)
+          *cfg.stone_start_offset)
     return stone_y
 
   def _update_status(self, physics):
