@@ -41,6 +41,13 @@ def test_unknown_option_names_the_allowed_ones():
     coop_suite.load("transport", 2, seed=1.5)
 
 
+def test_a_ravine_the_arena_cannot_hold_is_refused():
+  with pytest.raises(ValueError, match="ravine's length"):
+    coop_suite.load("ravine", 2, length=24.0)  # Open ends.
+  with pytest.raises(ValueError, match="before the finish line"):
+    coop_suite.load("ravine", 2, stage="crossers", width=1.0)
+
+
 @pytest.mark.parametrize("args,kwargs,error", [
     (("tranport", 4), {}, ValueError), (("ravine", 9), {}, ValueError),
     (("transport", 2.0), {}, TypeError),

@@ -24,18 +24,20 @@ class RavineArena(floor.Floor):
       size: half-extents of the plane (metres).
       width: trench width along x (metres); fits one Ant across.
       depth: trench depth (metres); equals the stone's height.
-      length: trench length along y (metres), at most 2 * size[1].
+      length: trench length along y (metres), less than 2 * size[1].
       ravine_x: x of the trench's centre line (metres).
       finish_distance: distance from the far edge to the finish line.
       **kwargs: passed to `Floor`.
     """
     self.width = width
     self.depth = depth
-    if not 0 < length <= 2 * size[1]:
+    if not 0 < length < 2 * size[1]:
       # Clipping it would leave the task's layout (stone, pushers) using
-      # the length asked for, beyond the trench's closed ends.
-      raise ValueError(f"The ravine's length must be in (0, {2 * size[1]:g}] "
-                       f"(the plane's extent along y), got {length!r}.")
+      # the length asked for, beyond the trench's closed ends; at the
+      # plane's extent the ends would be open.
+      raise ValueError(f"The ravine's length must be in (0, {2 * size[1]:g}) "
+                       f"(shorter than the plane along y, so that its ends "
+                       f"are closed), got {length!r}.")
     self.length = length
     self.ravine_x = ravine_x
     self.near_edge_x = ravine_x - width / 2

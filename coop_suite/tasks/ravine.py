@@ -118,11 +118,11 @@ class RavineConfig(base.TaskConfig):
   stone_start_offset: tuple = (-1.5, 3.0)
   """Crossers stage: range of a stone start's x relative to the near edge
   (m; negative before it): from 1.5 m before the edge, over the stone
-  (0 to `width`), to 1 m past the far edge (the finish line is 2 m past
-  it). Starting past the far edge, walking back means falling in. Starts
-  on the stone's middle only (0.6-1.4 m) left the policy walking back off
-  the stone (no crossing in 1.9M steps); from 0.6-3.0 m it crossed from
-  every such start within 1.7M steps, but never stepped onto the stone
+  (which spans 0.05 to `width` - 0.05), to 1 m past the far edge; below
+  the finish line (2 m past the far edge). Starts on the stone's middle
+  only (0.6-1.4 m) left the policy walking back off the stone (no
+  crossing in 1.9M steps); from 0.6-3.0 m it crossed from 0.94 of such
+  starts at 1.7M steps and all at 3.5M, but never stepped onto the stone
   from 0.5-1.5 m before the edge (docs/results.md)."""
 
 
@@ -150,6 +150,12 @@ class Ravine(base.CoopTask):
     arena = arenas.RavineArena(width=config.width, depth=config.depth,
                                length=config.length,
                                physics_timestep=config.physics_timestep)
+    finish = arena.finish_x - arena.near_edge_x
+    if config.stone_start_offset[1] >= finish:
+      raise ValueError(
+          f"RavineConfig.stone_start_offset must end before the finish line "
+          f"({finish:g} m past the near edge), got "
+          f"{tuple(config.stone_start_offset)!r}.")
     self.stone = Stone(size=(config.stone_length, config.width - 0.1,
                              config.depth), mass=config.stone_mass)
     arena.add_free_entity(self.stone)
@@ -249,8 +255,8 @@ class Ravine(base.CoopTask):
           *cfg.edge_start_distance, size=int(at_edge.sum()))
     if (in_path is not None and cfg.stone_start_probability > 0
         and random_state.uniform() < cfg.stone_start_probability):
-      # On the stone or past it, its y already within stone_in_path_distance
-      # of the stone's.
+      # In front of the stone, on it or past it, its y already within
+      # stone_in_path_distance of the stone's.
       crossers[in_path, 0] = arena.near_edge_x + random_state.uniform(
           *cfg.stone_start_offset)
     return stone_y
