@@ -284,6 +284,11 @@ def test_the_plan_is_the_papers():
                   paper_plan.CROSSERS_FLAGS)))
     else:
       assert 'initial_action_std' not in flags, cell.name
+    if cell.stage in ('pushers', 'crossers'):  # The crossers train longer.
+      assert cell.budget == {'pushers': paper_plan.STAGE_BUDGET,
+                             'crossers': paper_plan.CROSSERS_BUDGET}[
+                                 cell.stage] and (paper_plan.CROSSERS_BUDGET
+                                                  > paper_plan.STAGE_BUDGET)
   ablations = [c for c in plan if c.agent in ('flat', 'no_memory')]
   assert {c.seed for c in ablations} == {0, 1, 2}
   assert [c.agent for c in plan[:len(hrl) + 10]].count('flat') == 0
