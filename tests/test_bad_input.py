@@ -46,6 +46,10 @@ def test_a_ravine_the_arena_cannot_hold_is_refused():
     coop_suite.load("ravine", 2, length=24.0)  # Open ends.
   with pytest.raises(ValueError, match="before the finish line"):
     coop_suite.load("ravine", 2, stage="crossers", width=1.0)
+  # Where no stone start is drawn, its range does not matter.
+  coop_suite.load("ravine", 2, width=1.0).close()
+  coop_suite.load("ravine", 2, stage="crossers", width=1.0,
+                  stone_start_probability=0.0).close()
 
 
 @pytest.mark.parametrize("args,kwargs,error", [

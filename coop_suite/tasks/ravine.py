@@ -151,7 +151,8 @@ class Ravine(base.CoopTask):
                                length=config.length,
                                physics_timestep=config.physics_timestep)
     finish = arena.finish_x - arena.near_edge_x
-    if config.stone_start_offset[1] >= finish:
+    if (stage == "crossers" and config.stone_start_probability > 0
+        and config.stone_start_offset[1] >= finish):  # Only there it acts.
       raise ValueError(
           f"RavineConfig.stone_start_offset must end before the finish line "
           f"({finish:g} m past the near edge), got "
