@@ -111,7 +111,8 @@ class RavineConfig(base.TaskConfig):
   edge takes ~10 consecutive forward commands that sampled commands never
   strung together (no crossing in 1M steps with crossers at the edge).
   With 0.3 (a crosser on the stone's middle in 15% of the episodes) the
-  stage never crossed, with the default command noise or a small one: the
+  stage did not learn to cross (0.01 an episode in one run's first
+  updates, none after), with the default command noise or a small one: the
   policy learned to hold ~1.4 m before the near edge and, on the stone,
   walked back to that (docs/results.md). A fallen crosser stays in the
   trench, where it can push the stone."""
