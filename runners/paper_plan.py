@@ -25,6 +25,8 @@ import dataclasses
 import fnmatch
 from typing import Any
 
+from agents.hierarchy import config as hierarchy_config
+
 BUDGET = 15_000_000
 """Environment steps per trained model: the stable learner's evidence
 budget (the issue that stabilised it asked for at most 15M on transport;
@@ -169,7 +171,8 @@ def trained(experiment, task, agent, n_agents, seed, zero_shot=(),
   if task != 'ravine':
     return [Cell(experiment, task, agent, n_agents, seed, budget,
                  zero_shot=zero_shot, flags=flags)]
-  crossers = CROSSERS_FLAGS if agent != 'flat' else ()  # 'flat': no commands.
+  crossers = (CROSSERS_FLAGS if hierarchy_config.HierarchyConfig(
+      agent=agent).uses_commands else ())  # Its std is the commands'.
   stages = [Cell(experiment, task, agent, n_agents, seed, steps,
                  stage=stage, flags=flags + extra)
             for stage, steps, extra in (
