@@ -4,6 +4,8 @@
     coop-eval --checkpoint runs/m0 runs/m1 runs/m2 --n-agents 6   # zero-shot
     coop-eval --checkpoint runs/transport_hrl_n4_s0 --video transport.mp4
     coop-eval --checkpoint runs/m0 runs/m1 --seeds 1000 --json eval.json
+    coop-eval --checkpoint runs/ravine_hrl_crossers_n2_s0 \
+        --option stone_start_probability=1 'stone_start_offset=[-0.5,0]'
 
 `--checkpoint` takes run directories (their newest checkpoint) or checkpoint
 directories; several are several trained models (the paper: 5 models x 100
@@ -13,8 +15,11 @@ that each play a fixed share, so short episodes are not over-represented.
 
 Prints the success rate and mean return with their standard errors over all
 models x seeds x episodes (and, for several models, the spread between
-models). The task and agent count default to the training ones; any other
-count works (one policy per species, fixed-size exteroception). `--video`
+models), then the means of the task's other episode figures (e.g. the
+ravine's `crossed` and `fallen`). The task and agent count default to the
+training ones; any other count works (one policy per species, fixed-size
+exteroception); `--option` sets any field of the task's config, e.g. to
+play a curriculum stage from chosen starts. `--video`
 films the first evaluated episode (first model, first seed, first copy) as
 it is played, headless, one frame per control step, with
 `coop_suite.camera.FramingCamera`. `--json` writes every
@@ -24,6 +29,7 @@ import dataclasses
 import json
 import os
 import sys
+from typing import Any
 
 import numpy as np
 
@@ -85,6 +91,13 @@ class EvalArgs:
   strip: str = ''
   """With --video: also this PNG, the filmed episode's frames at 0, 1/4,
   1/2, 3/4 and its end side by side at half size (a still for docs)."""
+  option: tuple[str, ...] = ()
+  """Task options of the evaluation, KEY=VALUE each, VALUE read as JSON
+  (`1`, `true`, `[-0.5,0]`; else as text): any field of the task's config
+  (docs/tasks.md) over the training run's, e.g. `stone_start_probability=1
+  stone_start_offset=[-0.5,0]` plays the ravine's crossers stage with every
+  crosser's start on the path 0-0.5 m before the near edge. Stage, pushers
+  and time limit have their own flags. Saved with each model's figures."""
 
   def __post_init__(self):
     if not self.checkpoint:
@@ -94,6 +107,33 @@ class EvalArgs:
     if self.strip and not self.video:
       raise ValueError('--strip needs --video FILE.mp4 (it is cut from it).')
     fields.check(self)
+    self.task_options()
+
+  def task_options(self) -> dict[str, Any]:
+    """`--option`'s KEY=VALUE pairs as `coop_suite.load` options (JSON
+    lists become tuples); raises ValueError on a malformed or repeated
+    one. Whether the task has the option is checked when it is known
+    (`load_model`)."""
+    options = {}
+    for item in self.option:
+      key, equals, text = item.partition('=')
+      key = key.strip()
+      if not equals or not key.isidentifier():
+        raise ValueError(f'--option takes KEY=VALUE, got {item!r}.')
+      if key in _OWN_FLAGS:
+        raise ValueError(f'--option {key}: use {fields.flag(key)}.')
+      if key in options:
+        raise ValueError(f'--option {key} is given twice.')
+      try:
+        value = json.loads(text)
+      except ValueError:
+        value = text
+      options[key] = tuple(value) if isinstance(value, list) else value
+    return options
+
+
+# Task options that are evaluation flags of their own.
+_OWN_FLAGS = ('stage', 'n_pushers', 'time_limit')
 
 
 def load_model(path: str, args: EvalArgs):
@@ -118,7 +158,14 @@ def load_model(path: str, args: EvalArgs):
     files = envs_lib.read_controller(
         train.paradigm, args.controller or (
             copy if os.path.exists(os.path.join(copy, 'config.json')) else ''))
-  spec = envs_lib.EnvSpec(train.task, train.n_agents, train.env_options(),
+  options = {**train.env_options(), **args.task_options()}
+  if args.option:
+    import coop_suite  # pylint: disable=g-import-not-at-top
+    try:
+      coop_suite.check_options(train.task, train.n_agents, **options)
+    except (TypeError, ValueError) as e:
+      raise ValueError(f'--option: {e}') from e
+  spec = envs_lib.EnvSpec(train.task, train.n_agents, options,
                           config.uses_commands, train.command_period, files,
                           config.adds_locomotion_terms)
   models = {}
@@ -301,17 +348,31 @@ def evaluate(args: EvalArgs, log=None) -> dict:
                       'stage': spec.options.get('stage', ''),
                       'agent': config.agent,
                       'seed': config.seed,
+                      'options': args.task_options(),
                       'episodes': [metrics_lib.episode_figures(e)
                                    for e in played]})
   success, success_se = mean_and_error([e['success'] for e in episodes])
   ret, ret_se = mean_and_error([e['return'] for e in episodes])
   out = {'description': description, 'episodes': len(episodes),
          'success': success, 'success_se': success_se, 'return': ret,
-         'return_se': ret_se, 'models': per_model, 'filmed_success': filmed}
+         'return_se': ret_se, 'figures': task_figures(per_model),
+         'models': per_model, 'filmed_success': filmed}
   if len(per_model) > 1:
     out['success_se_models'] = mean_and_error(
         [m['success'] for m in per_model])[1]
   return out
+
+
+def task_figures(models) -> dict[str, float]:
+  """Means over every evaluated episode of the task's own figures (the
+  ones every episode has, besides success, return and reward terms), in
+  `metrics.episode_keys` order."""
+  from runners import metrics as metrics_lib  # pylint: disable=g-import-not-at-top
+  episodes = [e for m in models for e in m['episodes']]
+  shared = set.intersection(*(set(e) for e in episodes))
+  keys = [k for k in metrics_lib.episode_keys(episodes[0]) if k in shared
+          and k not in ('return', 'success') and not k.startswith('reward/')]
+  return {k: float(np.mean([e[k] for e in episodes])) for k in keys}
 
 
 def main(argv=None):
@@ -320,6 +381,9 @@ def main(argv=None):
                       'coop-eval', __doc__.splitlines()[0])
   print(f'{out["description"]}: {len(args.checkpoint)} model(s) x '
         f'{len(args.seeds)} seed(s) x {args.episodes} episodes')
+  if args.option:
+    print('task options: ' + ', '.join(
+        f'{k}={v!r}' for k, v in args.task_options().items()))
   for model in out['models']:
     print(f'  {model["checkpoint"]} (update {model["update"]}, '
           f'{model["env_steps"]} env steps): success '
@@ -331,6 +395,9 @@ def main(argv=None):
     line += f', +- {100 * out["success_se_models"]:.1f}% between models'
   print(line)
   print(f'mean return {out["return"]:.2f} +- {out["return_se"]:.2f}')
+  if out['figures']:
+    print('means: ' + ', '.join(f'{k} {v:.3g}'
+                                for k, v in out['figures'].items()))
   if args.video:
     print(f'video: {args.video} (the filmed episode '
           f'{"succeeded" if out["filmed_success"] else "failed"})')

@@ -157,6 +157,12 @@ def test_help_shows_every_flag_with_its_docstring(cls, capsys):
      '--n-agents must be 0 (the training one), or >= 1, got -2.'),
     (evaluate.main, ['--checkpoint', 'x', '--strip', 'x.png'],
      '--strip needs --video FILE.mp4'),
+    (evaluate.main, ['--checkpoint', 'x', '--option', 'target_radius'],
+     "--option takes KEY=VALUE, got 'target_radius'."),
+    (evaluate.main, ['--checkpoint', 'x', '--option', 'stage=push'],
+     '--option stage: use --stage.'),
+    (evaluate.main, ['--checkpoint', 'x', '--option', 'a=1', 'a=2'],
+     '--option a is given twice.'),
     (pretrain_lowlevel.main, ['--discount', '2'], '--discount'),
     (eval_lowlevel.main, ['--episodes', '0'], '--episodes'),
 ])
@@ -231,6 +237,22 @@ def test_an_old_flat_config_loads_passes_the_resume_check_and_plays(
       checkpoint=(run,), n_agents=2, episodes=1, envs=1, time_limit=1.0))
   assert out['models'][0]['update'] == 659
   assert math.isfinite(out['return']) and out['episodes'] == 1
+  # --option plays it on a changed task: a target as large as the arena,
+  # held for a step, is reached at once, which 1 s of the real task is not.
+  easy = evaluate.evaluate(evaluate.EvalArgs(
+      checkpoint=(run,), n_agents=2, episodes=1, envs=1, time_limit=1.0,
+      option=('target_radius=100', 'hold_time=0.05')))
+  assert (out['success'], easy['success']) == (0.0, 1.0)
+  assert easy['models'][0]['options'] == {'target_radius': 100,
+                                          'hold_time': 0.05}
+  assert easy['figures']['reached'] == 1.0
+  for option, message in (
+      ('no_such_option=1', 'Unknown option'),
+      ('start_distance=2', r'must be a \(low, high\) pair'),
+      ('start_distance=[3,2]', 'low <= high')):
+    with pytest.raises(ValueError, match=f'--option: .*{message}'):
+      evaluate.load_model(run, evaluate.EvalArgs(checkpoint=(run,),
+                                                 option=(option,)))
 
 
 def test_the_clis_check_their_flags_without_jax_or_mujoco():
