@@ -90,3 +90,20 @@ def check(config) -> None:
       shown = list(value) if isinstance(value, (tuple, list)) else value
       raise ValueError(f'{flag(f.name)} must be {allowed.text}, got '
                        f'{shown!r}.')
+
+
+def pairs(items, name: str, form: str) -> dict[str, str]:
+  """{KEY: VALUE} of the KEY=VALUE strings `items` of field `name` (a flag
+  taking several pairs, e.g. `--init-from pusher=DIR`); ValueError naming
+  the flag, with `form` (e.g. 'SPECIES=PATH pairs (e.g. pusher=runs/a)'),
+  for a malformed pair or a key given twice."""
+  out = {}
+  for item in items:
+    key, equals, value = str(item).partition('=')
+    key = key.strip()
+    if not equals or not key or not value:
+      raise ValueError(f'{flag(name)} takes {form}, got {item!r}.')
+    if key in out:
+      raise ValueError(f'{flag(name)} names {key!r} twice.')
+    out[key] = value
+  return out

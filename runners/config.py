@@ -123,16 +123,8 @@ class TrainArgs:
 
   def init_sources(self) -> dict[str, str]:
     """`init_from` as {species: path}; ValueError naming the bad pair."""
-    sources = {}
-    for pair in self.init_from:
-      species, _, path = str(pair).partition('=')
-      if not species or not path:
-        raise ValueError(f'--init-from takes SPECIES=PATH pairs (e.g. '
-                         f'pusher=runs/ravine_pushers), got {pair!r}.')
-      if species in sources:
-        raise ValueError(f'--init-from names species {species!r} twice.')
-      sources[species] = path
-    return sources
+    return fields.pairs(self.init_from, 'init_from',
+                        'SPECIES=PATH pairs (e.g. pusher=runs/ravine_pushers)')
 
   @property
   def agent(self) -> str:

@@ -6,6 +6,8 @@
     coop-eval --checkpoint runs/m0 runs/m1 --seeds 1000 --json eval.json
     coop-eval --checkpoint runs/ravine_hrl_crossers_n2_s0 \
         --option stone_start_probability=1 'stone_start_offset=[-0.5,0]'
+    coop-eval --checkpoint results/paper/ravine_hrl_crossers_n2_s0 \
+        --stage joint --policy-from pusher=results/paper/ravine_hrl_pushers_n2_s0
 
 `--checkpoint` takes run directories (their newest checkpoint) or checkpoint
 directories; several are several trained models (the paper: 5 models x 100
@@ -19,7 +21,9 @@ models), then the means of the task's other episode figures (e.g. the
 ravine's `crossed` and `fallen`). The task and agent count default to the
 training ones; any other count works (one policy per species, fixed-size
 exteroception); `--option` sets any field of the task's config, e.g. to
-play a curriculum stage from chosen starts. `--video`
+play a curriculum stage from chosen starts, and `--policy-from` plays a
+species with another checkpoint's policy, e.g. to compose curriculum
+stages. `--video`
 films the first evaluated episode (first model, first seed, first copy) as
 it is played, headless, one frame per control step, with
 `coop_suite.camera.FramingCamera`. `--json` writes every
@@ -98,6 +102,13 @@ class EvalArgs:
   stone_start_offset=[-0.5,0]` plays the ravine's crossers stage with every
   crosser's start on the path 0-0.5 m before the near edge. Stage, pushers
   and time limit have their own flags. Saved with each model's figures."""
+  policy_from: tuple[str, ...] = ()
+  """Play these species with another checkpoint's policy, SPECIES=PATH
+  pairs (PATH a run or checkpoint directory, as --checkpoint): e.g. the
+  ravine's curriculum stages composed before their joint run, `--checkpoint
+  CROSSERS_RUN --stage joint --policy-from pusher=PUSHERS_RUN`. Both must
+  drive the same lower layer at the same command period. Saved with each
+  model's figures."""
 
   def __post_init__(self):
     if not self.checkpoint:
@@ -108,22 +119,21 @@ class EvalArgs:
       raise ValueError('--strip needs --video FILE.mp4 (it is cut from it).')
     fields.check(self)
     self.task_options()
+    self.policy_sources()
 
   def task_options(self) -> dict[str, Any]:
     """`--option`'s KEY=VALUE pairs as `coop_suite.load` options (JSON
     lists become tuples); raises ValueError on a malformed or repeated
-    one. Whether the task has the option is checked when it is known
+    pair (`fields.pairs`). Whether the task has the option is checked when it is known
     (`load_model`)."""
     options = {}
-    for item in self.option:
-      key, equals, text = item.partition('=')
-      key = key.strip()
-      if not equals or not key.isidentifier():
-        raise ValueError(f'--option takes KEY=VALUE, got {item!r}.')
+    for key, text in fields.pairs(
+        self.option, 'option', 'KEY=VALUE pairs (e.g. target_radius=1.5)'
+    ).items():
+      if not key.isidentifier():
+        raise ValueError(f'--option {key!r}: not an option name.')
       if key in _OWN_FLAGS:
         raise ValueError(f'--option {key}: use {fields.flag(key)}.')
-      if key in options:
-        raise ValueError(f'--option {key} is given twice.')
       try:
         value = json.loads(text)
       except ValueError:
@@ -132,14 +142,20 @@ class EvalArgs:
     return options
 
 
+  def policy_sources(self) -> dict[str, str]:
+    """`--policy-from` as {species: path} (`fields.pairs`)."""
+    return fields.pairs(self.policy_from, 'policy_from',
+                        'SPECIES=PATH pairs (e.g. pusher=runs/ravine_pushers)')
+
+
 # Task options that are evaluation flags of their own.
 _OWN_FLAGS = ('stage', 'n_pushers', 'time_limit')
 
 
 def load_model(path: str, args: EvalArgs):
-  """(EnvSpec, HierarchyConfig, {species: (Species, learner)}, state) of
-  the checkpoint at `path`, set up for the evaluation task."""
-  from agents.hierarchy import builder as hierarchy_builder  # pylint: disable=g-import-not-at-top
+  """(EnvSpec, HierarchyConfig, {species: (Species, builder, networks,
+  learner)}, state) of the checkpoint at `path`, set up for the evaluation
+  task; the species of `--policy-from` come from their own checkpoints."""
   from agents.hierarchy import config as hierarchy_config  # pylint: disable=g-import-not-at-top
   from runners import checkpoints  # pylint: disable=g-import-not-at-top
   from runners import envs as envs_lib  # pylint: disable=g-import-not-at-top
@@ -152,12 +168,7 @@ def load_model(path: str, args: EvalArgs):
   train = dataclasses.replace(
       train, **{k: v for k, v in overrides.items() if v})
   config = hierarchy_config.HierarchyConfig(**state['agent_config'])
-  files = None
-  if config.uses_commands:
-    copy = os.path.join(checkpoints.run_directory(checkpoint), 'controller')
-    files = envs_lib.read_controller(
-        train.paradigm, args.controller or (
-            copy if os.path.exists(os.path.join(copy, 'config.json')) else ''))
+  files = _controller_files(checkpoint, train.paradigm, config, args)
   options = {**train.env_options(), **args.task_options()}
   if args.option:
     import coop_suite  # pylint: disable=g-import-not-at-top
@@ -168,6 +179,55 @@ def load_model(path: str, args: EvalArgs):
   spec = envs_lib.EnvSpec(train.task, train.n_agents, options,
                           config.uses_commands, train.command_period, files,
                           config.adds_locomotion_terms)
+  models = _load_policies(checkpoint, state, config)
+  sources = args.policy_sources()
+  for name, other_path in sources.items():
+    other = checkpoints.resolve(other_path)
+    other_state = checkpoints.read_state(other)
+    other_train = config_lib.TrainArgs.from_dict(other_state['args'])
+    other_config = hierarchy_config.HierarchyConfig(
+        **other_state['agent_config'])
+    kind = (config.uses_commands, config.adds_locomotion_terms,
+            train.command_period, files)
+    if kind != (other_config.uses_commands,
+                other_config.adds_locomotion_terms,
+                other_train.command_period,
+                _controller_files(other, other_train.paradigm, other_config,
+                                  args)):
+      raise ValueError(
+          f'--policy-from {name}={other_path}: its agent acts on the task '
+          f'otherwise ({other_config.agent}, command period '
+          f'{other_train.command_period} s, its own lower layer) than '
+          f'{path} ({config.agent}, {train.command_period} s).')
+    loaded = _load_policies(other, other_state, other_config)
+    if name not in loaded:
+      raise ValueError(f'--policy-from {name}={other_path}: no policy for '
+                       f'species {name!r} there (it has {sorted(loaded)}).')
+    models[name] = loaded[name]
+  return spec, config, models, {
+      **state, 'checkpoint': checkpoint,
+      'policy_from': {name: checkpoints.resolve(p)
+                      for name, p in sources.items()}}
+
+
+def _controller_files(checkpoint, paradigm, config, args):
+  """The lower layer a checkpoint's commands drive (`--controller`, else
+  the run's own copy, else the shipped weights); None without commands."""
+  from runners import checkpoints  # pylint: disable=g-import-not-at-top
+  from runners import envs as envs_lib  # pylint: disable=g-import-not-at-top
+  if not config.uses_commands:
+    return None
+  copy = os.path.join(checkpoints.run_directory(checkpoint), 'controller')
+  return envs_lib.read_controller(paradigm, args.controller or (
+      copy if os.path.exists(os.path.join(copy, 'config.json')) else ''))
+
+
+def _load_policies(checkpoint, state, config):
+  """{species: (Species, builder, networks, learner)} of every species the
+  checkpoint (its `state`, agent `config`) holds."""
+  from agents.hierarchy import builder as hierarchy_builder  # pylint: disable=g-import-not-at-top
+  from runners import checkpoints  # pylint: disable=g-import-not-at-top
+  from runners import envs as envs_lib  # pylint: disable=g-import-not-at-top
   models = {}
   for saved in state['species']:
     species = envs_lib.Species(**{**saved, 'agents': tuple(saved['agents']),
@@ -185,7 +245,7 @@ def load_model(path: str, args: EvalArgs):
     else:
       learner.restore(saved, source=source)
     models[species.name] = (species, builder, networks, learner)
-  return spec, config, models, {**state, 'checkpoint': checkpoint}
+  return models
 
 
 def _actors(batch, models, seed, deterministic):
@@ -349,6 +409,7 @@ def evaluate(args: EvalArgs, log=None) -> dict:
                       'agent': config.agent,
                       'seed': config.seed,
                       'options': args.task_options(),
+                      'policy_from': state['policy_from'],
                       'episodes': [metrics_lib.episode_figures(e)
                                    for e in played]})
   success, success_se = mean_and_error([e['success'] for e in episodes])
@@ -381,6 +442,8 @@ def main(argv=None):
                       'coop-eval', __doc__.splitlines()[0])
   print(f'{out["description"]}: {len(args.checkpoint)} model(s) x '
         f'{len(args.seeds)} seed(s) x {args.episodes} episodes')
+  for name, source in out['models'][0]['policy_from'].items():
+    print(f'{name}: the policy of {source}')
   if args.option:
     print('task options: ' + ', '.join(
         f'{k}={v!r}' for k, v in args.task_options().items()))

@@ -149,6 +149,10 @@ def test_help_shows_every_flag_with_its_docstring(cls, capsys):
     (train.main, ['--agent', 'feudal'], "--agent must be one of ('hrl', "),
     (train.main, ['--discount', '1.5'], '--discount must be in [0, 1]'),
     (train.main, ['--actors', '-1'], '--actors must be >= 0'),
+    (train.main, ['--init-from', 'pusher'],
+     "--init-from takes SPECIES=PATH pairs (e.g. pusher=runs/ravine_pushers)"
+     ", got 'pusher'."),
+    (train.main, ['--init-from', 'a=x', 'a=y'], "--init-from names 'a' twice."),
     (train.main, ['--time-limit', 'inf'],
      "--time-limit must be 0 (the task's default), or > 0, got inf."),
     (video.main, ['--fps', '0', '--png', 'x.png'], '--fps must be >= 1'),
@@ -158,11 +162,12 @@ def test_help_shows_every_flag_with_its_docstring(cls, capsys):
     (evaluate.main, ['--checkpoint', 'x', '--strip', 'x.png'],
      '--strip needs --video FILE.mp4'),
     (evaluate.main, ['--checkpoint', 'x', '--option', 'target_radius'],
-     "--option takes KEY=VALUE, got 'target_radius'."),
+     "--option takes KEY=VALUE pairs (e.g. target_radius=1.5), got "
+     "'target_radius'."),
     (evaluate.main, ['--checkpoint', 'x', '--option', 'stage=push'],
      '--option stage: use --stage.'),
     (evaluate.main, ['--checkpoint', 'x', '--option', 'a=1', 'a=2'],
-     '--option a is given twice.'),
+     "--option names 'a' twice."),
     (pretrain_lowlevel.main, ['--discount', '2'], '--discount'),
     (eval_lowlevel.main, ['--episodes', '0'], '--episodes'),
 ])
@@ -253,6 +258,35 @@ def test_an_old_flat_config_loads_passes_the_resume_check_and_plays(
     with pytest.raises(ValueError, match=f'--option: .*{message}'):
       evaluate.load_model(run, evaluate.EvalArgs(checkpoint=(run,),
                                                  option=(option,)))
+  # --policy-from takes a species' policy from another checkpoint: that
+  # one's parameters, if it drives the task alike and has the species.
+  other = str(tmp_path / 'other')
+  shutil.copytree(_OLD_RUN, other)
+  state_file = os.path.join(other, 'checkpoints', 'ckpt_00000659',
+                            'state.json')
+  with open(state_file) as f:
+    state = json.load(f)
+  _, _, models, loaded = evaluate.load_model(run, evaluate.EvalArgs(
+      checkpoint=(run,), policy_from=(f'ant={other}',)))
+  assert loaded['policy_from'] == {'ant': os.path.dirname(state_file)}
+  # The policy is read from there: without its parameters it cannot load.
+  os.rename(os.path.join(os.path.dirname(state_file), 'ant.msgpack'),
+            str(tmp_path / 'ant.msgpack'))
+  with pytest.raises(ValueError, match='other.*ant.msgpack cannot be read'):
+    evaluate.load_model(run, evaluate.EvalArgs(
+        checkpoint=(run,), policy_from=(f'ant={other}',)))
+  os.rename(str(tmp_path / 'ant.msgpack'),
+            os.path.join(os.path.dirname(state_file), 'ant.msgpack'))
+  for name, change, message in (
+      ('pusher', {}, r"no policy for species 'pusher' there \(it has "
+                     r"\['ant'\]\)"),
+      ('ant', {'command_period': 1.0}, 'acts on the task otherwise')):
+    state['args'].update(change)
+    with open(state_file, 'w') as f:
+      json.dump(state, f)
+    with pytest.raises(ValueError, match=f'--policy-from {name}=.*{message}'):
+      evaluate.load_model(run, evaluate.EvalArgs(
+          checkpoint=(run,), policy_from=(f'{name}={other}',)))
 
 
 def test_the_clis_check_their_flags_without_jax_or_mujoco():
