@@ -11,7 +11,9 @@ flag and what it allows:
     --learning-rate must be > 0, got -0.001.
 
 `field(..., resumable=True)` marks an argument of a run that may change when
-the run is resumed (`runners.config.check_resumable`).
+the run is resumed (`runners.config.check_resumable`). A field of KEY=VALUE
+strings (`--init-from pusher=DIR`) reads as a dict with `pairs`, whose
+errors name the flag alike.
 """
 import dataclasses
 import math

@@ -5,9 +5,10 @@
     coop-eval --checkpoint runs/transport_hrl_n4_s0 --video transport.mp4
     coop-eval --checkpoint runs/m0 runs/m1 --seeds 1000 --json eval.json
     coop-eval --checkpoint runs/ravine_hrl_crossers_n2_s0 \
-        --option stone_start_probability=1 'stone_start_offset=[-0.5,0]'
-    coop-eval --checkpoint results/paper/ravine_hrl_crossers_n2_s0 \
-        --stage joint --policy-from pusher=results/paper/ravine_hrl_pushers_n2_s0
+        --option stone_in_path_probability=1 stone_start_probability=1 \
+        'stone_start_offset=[-0.5,0]'
+    coop-eval --checkpoint runs/ravine_hrl_crossers_n2_s0 --stage joint \
+        --policy-from pusher=runs/ravine_hrl_pushers_n2_s0
 
 `--checkpoint` takes run directories (their newest checkpoint) or checkpoint
 directories; several are several trained models (the paper: 5 models x 100
@@ -98,17 +99,18 @@ class EvalArgs:
   option: tuple[str, ...] = ()
   """Task options of the evaluation, KEY=VALUE each, VALUE read as JSON
   (`1`, `true`, `[-0.5,0]`; else as text): any field of the task's config
-  (docs/tasks.md) over the training run's, e.g. `stone_start_probability=1
-  stone_start_offset=[-0.5,0]` plays the ravine's crossers stage with every
-  crosser's start on the path 0-0.5 m before the near edge. Stage, pushers
-  and time limit have their own flags. Saved with each model's figures."""
+  (docs/tasks.md) over the training run's, e.g. `stone_in_path_probability=1
+  stone_start_probability=1 stone_start_offset=[-0.5,0]` plays the ravine's
+  crossers stage with the stone across one crosser's path and that crosser
+  starting 0-0.5 m before the near edge. Task, agents, stage, pushers and
+  time limit have their own flags. Saved with each model's figures."""
   policy_from: tuple[str, ...] = ()
   """Play these species with another checkpoint's policy, SPECIES=PATH
   pairs (PATH a run or checkpoint directory, as --checkpoint): e.g. the
   ravine's curriculum stages composed before their joint run, `--checkpoint
   CROSSERS_RUN --stage joint --policy-from pusher=PUSHERS_RUN`. Both must
-  drive the same lower layer at the same command period. Saved with each
-  model's figures."""
+  drive the same lower layer at the same command period, and the evaluated
+  task must have the species. Saved with each model's figures."""
 
   def __post_init__(self):
     if not self.checkpoint:
@@ -124,8 +126,8 @@ class EvalArgs:
   def task_options(self) -> dict[str, Any]:
     """`--option`'s KEY=VALUE pairs as `coop_suite.load` options (JSON
     lists become tuples); raises ValueError on a malformed or repeated
-    pair (`fields.pairs`). Whether the task has the option is checked when it is known
-    (`load_model`)."""
+    pair (`fields.pairs`) or a key with a flag of its own. Whether the task
+    has the option is checked when the task is known (`load_model`)."""
     options = {}
     for key, text in fields.pairs(
         self.option, 'option', 'KEY=VALUE pairs (e.g. target_radius=1.5)'
@@ -133,7 +135,7 @@ class EvalArgs:
       if not key.isidentifier():
         raise ValueError(f'--option {key!r}: not an option name.')
       if key in _OWN_FLAGS:
-        raise ValueError(f'--option {key}: use {fields.flag(key)}.')
+        raise ValueError(f'--option {key}: use {_OWN_FLAGS[key]}.')
       try:
         value = json.loads(text)
       except ValueError:
@@ -141,15 +143,16 @@ class EvalArgs:
       options[key] = tuple(value) if isinstance(value, list) else value
     return options
 
-
   def policy_sources(self) -> dict[str, str]:
     """`--policy-from` as {species: path} (`fields.pairs`)."""
     return fields.pairs(self.policy_from, 'policy_from',
                         'SPECIES=PATH pairs (e.g. pusher=runs/ravine_pushers)')
 
 
-# Task options that are evaluation flags of their own.
-_OWN_FLAGS = ('stage', 'n_pushers', 'time_limit')
+# `coop_suite.load` arguments that are evaluation flags of their own.
+_OWN_FLAGS = {'task': '--task', 'n_agents': '--n-agents', 'stage': '--stage',
+              'n_pushers': '--n-pushers', 'time_limit': '--time-limit',
+              'seed': '--seeds (they seed the copies)'}
 
 
 def load_model(path: str, args: EvalArgs):
@@ -179,35 +182,48 @@ def load_model(path: str, args: EvalArgs):
   spec = envs_lib.EnvSpec(train.task, train.n_agents, options,
                           config.uses_commands, train.command_period, files,
                           config.adds_locomotion_terms)
-  models = _load_policies(checkpoint, state, config)
-  sources = args.policy_sources()
-  for name, other_path in sources.items():
+  models = {s['name']: _load_policy(checkpoint, state, config, s)
+            for s in state['species']}
+  borrowed = {}
+  if args.policy_from:
+    env = spec.make(0)  # The evaluated task's species layout.
+    try:
+      layout = {s.name: s for s in envs_lib.species_layout(env, config)}
+    finally:
+      env.close()
+  for name, other_path in args.policy_sources().items():
     other = checkpoints.resolve(other_path)
     other_state = checkpoints.read_state(other)
     other_train = config_lib.TrainArgs.from_dict(other_state['args'])
     other_config = hierarchy_config.HierarchyConfig(
         **other_state['agent_config'])
-    kind = (config.uses_commands, config.adds_locomotion_terms,
+    where = f'--policy-from {name}={other_path}'
+    ours = (config.uses_commands, config.adds_locomotion_terms,
             train.command_period, files)
-    if kind != (other_config.uses_commands,
-                other_config.adds_locomotion_terms,
-                other_train.command_period,
-                _controller_files(other, other_train.paradigm, other_config,
-                                  args)):
-      raise ValueError(
-          f'--policy-from {name}={other_path}: its agent acts on the task '
-          f'otherwise ({other_config.agent}, command period '
-          f'{other_train.command_period} s, its own lower layer) than '
-          f'{path} ({config.agent}, {train.command_period} s).')
-    loaded = _load_policies(other, other_state, other_config)
-    if name not in loaded:
-      raise ValueError(f'--policy-from {name}={other_path}: no policy for '
-                       f'species {name!r} there (it has {sorted(loaded)}).')
-    models[name] = loaded[name]
-  return spec, config, models, {
-      **state, 'checkpoint': checkpoint,
-      'policy_from': {name: checkpoints.resolve(p)
-                      for name, p in sources.items()}}
+    theirs = (other_config.uses_commands, other_config.adds_locomotion_terms,
+              other_train.command_period,
+              _controller_files(other, other_train.paradigm, other_config,
+                                args))
+    for what, a, b in zip(('uses_commands', 'adds_locomotion_terms',
+                           'command period (s)'), ours, theirs):
+      if a != b:
+        raise ValueError(f'{where}: {what} is {b} there, {a} in {path}.')
+    if ours[3] != theirs[3]:
+      raise ValueError(f'{where}: another lower layer than {path}\'s.')
+    saved = [s for s in other_state['species'] if s['name'] == name]
+    if not saved:
+      has = sorted(s['name'] for s in other_state['species'])
+      raise ValueError(f'{where}: no policy for species {name!r} there (it '
+                       f'has {has}).')
+    if name not in layout:
+      raise ValueError(f'{where}: the evaluated task has no species '
+                       f'{name!r} (it has {sorted(layout)}).')
+    # Its own noise stream: the evaluated layout's index, not its run's.
+    models[name] = _load_policy(other, other_state, other_config, {
+        **saved[0], 'species_id': layout[name].species_id})
+    borrowed[name] = other
+  return spec, config, models, {**state, 'checkpoint': checkpoint,
+                                'policy_from': borrowed}
 
 
 def _controller_files(checkpoint, paradigm, config, args):
@@ -222,30 +238,27 @@ def _controller_files(checkpoint, paradigm, config, args):
       copy if os.path.exists(os.path.join(copy, 'config.json')) else ''))
 
 
-def _load_policies(checkpoint, state, config):
-  """{species: (Species, builder, networks, learner)} of every species the
-  checkpoint (its `state`, agent `config`) holds."""
+def _load_policy(checkpoint, state, config, saved):
+  """(Species, builder, networks, learner) of the species `saved` (one of
+  `state['species']`) of the checkpoint (its `state`, agent `config`)."""
   from agents.hierarchy import builder as hierarchy_builder  # pylint: disable=g-import-not-at-top
   from runners import checkpoints  # pylint: disable=g-import-not-at-top
   from runners import envs as envs_lib  # pylint: disable=g-import-not-at-top
-  models = {}
-  for saved in state['species']:
-    species = envs_lib.Species(**{**saved, 'agents': tuple(saved['agents']),
-                                  'observation_keys': tuple(
-                                      saved['observation_keys'])})
-    builder = hierarchy_builder.HierarchyBuilder(config, species.species_id)
-    networks = builder.make_networks(species.observation_size,
-                                     species.action_size,
-                                     species.global_state_size)
-    learner = builder.make_learner(networks)
-    saved = checkpoints.saved_learner(checkpoint, species.name)
-    source = f'{checkpoint} ({species.name})'
-    if state.get('policy_only'):  # Parameters and statistics are all it has.
-      learner.initialize_from(saved, source=source)
-    else:
-      learner.restore(saved, source=source)
-    models[species.name] = (species, builder, networks, learner)
-  return models
+  species = envs_lib.Species(**{**saved, 'agents': tuple(saved['agents']),
+                                'observation_keys': tuple(
+                                    saved['observation_keys'])})
+  builder = hierarchy_builder.HierarchyBuilder(config, species.species_id)
+  networks = builder.make_networks(species.observation_size,
+                                   species.action_size,
+                                   species.global_state_size)
+  learner = builder.make_learner(networks)
+  parameters = checkpoints.saved_learner(checkpoint, species.name)
+  source = f'{checkpoint} ({species.name})'
+  if state.get('policy_only'):  # Parameters and statistics are all it has.
+    learner.initialize_from(parameters, source=source)
+  else:
+    learner.restore(parameters, source=source)
+  return species, builder, networks, learner
 
 
 def _actors(batch, models, seed, deterministic):

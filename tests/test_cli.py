@@ -166,6 +166,8 @@ def test_help_shows_every_flag_with_its_docstring(cls, capsys):
      "'target_radius'."),
     (evaluate.main, ['--checkpoint', 'x', '--option', 'stage=push'],
      '--option stage: use --stage.'),
+    (evaluate.main, ['--checkpoint', 'x', '--option', 'seed=3'],
+     '--option seed: use --seeds'),
     (evaluate.main, ['--checkpoint', 'x', '--option', 'a=1', 'a=2'],
      "--option names 'a' twice."),
     (pretrain_lowlevel.main, ['--discount', '2'], '--discount'),
@@ -242,6 +244,9 @@ def test_an_old_flat_config_loads_passes_the_resume_check_and_plays(
       checkpoint=(run,), n_agents=2, episodes=1, envs=1, time_limit=1.0))
   assert out['models'][0]['update'] == 659
   assert math.isfinite(out['return']) and out['episodes'] == 1
+  assert evaluate.EvalArgs(checkpoint=('x',), option=(
+      'start_distance=[1, 2.5]', 'success=any')).task_options() == {
+          'start_distance': (1, 2.5), 'success': 'any'}
   # --option plays it on a changed task: a target as large as the arena,
   # held for a step, is reached at once, which 1 s of the real task is not.
   easy = evaluate.evaluate(evaluate.EvalArgs(
@@ -277,16 +282,30 @@ def test_an_old_flat_config_loads_passes_the_resume_check_and_plays(
         checkpoint=(run,), policy_from=(f'ant={other}',)))
   os.rename(str(tmp_path / 'ant.msgpack'),
             os.path.join(os.path.dirname(state_file), 'ant.msgpack'))
-  for name, change, message in (
-      ('pusher', {}, r"no policy for species 'pusher' there \(it has "
-                     r"\['ant'\]\)"),
-      ('ant', {'command_period': 1.0}, 'acts on the task otherwise')):
-    state['args'].update(change)
-    with open(state_file, 'w') as f:
-      json.dump(state, f)
+  def refused(name, message):
     with pytest.raises(ValueError, match=f'--policy-from {name}=.*{message}'):
       evaluate.load_model(run, evaluate.EvalArgs(
           checkpoint=(run,), policy_from=(f'{name}={other}',)))
+  refused('pusher', r"no policy for species 'pusher' there \(it has "
+                    r"\['ant'\]\)")
+  # A species the evaluated task (transport: only Ants) does not have.
+  state['species'][0]['name'] = 'pusher'
+  os.rename(os.path.join(os.path.dirname(state_file), 'ant.msgpack'),
+            os.path.join(os.path.dirname(state_file), 'pusher.msgpack'))
+  with open(state_file, 'w') as f:
+    json.dump(state, f)
+  refused('pusher', r"the evaluated task has no species 'pusher' \(it has "
+                    r"\['ant'\]\)")
+  state['args']['command_period'] = 1.0
+  with open(state_file, 'w') as f:
+    json.dump(state, f)
+  refused('pusher', r'command period \(s\) is 1.0 there, 0.5 in ')
+  with open(os.path.join(other, 'controller', 'config.json'), 'a') as f:
+    f.write('\n')  # Another file, to the byte.
+  state['args']['command_period'] = 0.5
+  with open(state_file, 'w') as f:
+    json.dump(state, f)
+  refused('pusher', 'another lower layer than')
 
 
 def test_the_clis_check_their_flags_without_jax_or_mujoco():
