@@ -40,7 +40,7 @@ CROSSERS_BUDGET = 20_000_000
 edge first and stepping onto the stone from further back later: seed 0
 crossed from 0-0.5 m before the edge in 0.00 of the episodes at 3.3M
 steps and 0.75 at 10M, from 0.5-1.5 m in 0.00 and 0.09; at ~11M it began
-to cross from anywhere, walking along the edge to the stone (training
+to go to the stone and cross on it from every start tried (training
 windows' crossings 0.3 -> 1.7 of 2 an episode by 20M; 81% success on its
 stage at 20M; docs/results.md)."""
 CROSSERS_FLAGS = (('initial_action_std', 0.25),)

@@ -125,9 +125,9 @@ class RavineConfig(base.TaskConfig):
   crossing in 1.9M steps); from 0.6-3.0 m it crossed from 0.94 of such
   starts at 1.7M steps and all at 3.5M, but never stepped onto the stone
   from 0.5-1.5 m before the edge. With this range seed 0 stepped on from
-  0-0.5 m by 10M steps, and from ~11M crossed from anywhere, walking along
-  the edge to the stone: 81% of its stage's episodes at 20M, every crosser
-  across (docs/results.md)."""
+  0-0.5 m by 10M steps, and from ~11M went to the stone and crossed on it
+  from every start tried, the stone up to >6 m to a side included: 81% of
+  its stage's episodes at 20M, every crosser across (docs/results.md)."""
 
 
 class Ravine(base.CoopTask):
