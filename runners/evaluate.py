@@ -218,6 +218,12 @@ def load_model(path: str, args: EvalArgs):
     if name not in layout:
       raise ValueError(f'{where}: the evaluated task has no species '
                        f'{name!r} (it has {sorted(layout)}).')
+    if tuple(saved[0]['observation_keys']) != layout[name].observation_keys:
+      # The copies observe as the --checkpoint's agent reads the task.
+      raise ValueError(
+          f'{where}: it reads the observations '
+          f'{list(saved[0]["observation_keys"])}, {path}\'s agent '
+          f'{list(layout[name].observation_keys)}.')
     # Its own noise stream: the evaluated layout's index, not its run's.
     models[name] = _load_policy(other, other_state, other_config, {
         **saved[0], 'species_id': layout[name].species_id})

@@ -296,6 +296,16 @@ def test_an_old_flat_config_loads_passes_the_resume_check_and_plays(
     json.dump(state, f)
   refused('pusher', r"the evaluated task has no species 'pusher' \(it has "
                     r"\['ant'\]\)")
+  state['species'][0]['name'] = 'ant'
+  state['species'][0]['observation_keys'] = ['proprioception']
+  os.rename(os.path.join(os.path.dirname(state_file), 'pusher.msgpack'),
+            os.path.join(os.path.dirname(state_file), 'ant.msgpack'))
+  with open(state_file, 'w') as f:
+    json.dump(state, f)
+  refused('ant', r"it reads the observations \['proprioception'\]")
+  state['species'][0]['name'] = 'pusher'
+  os.rename(os.path.join(os.path.dirname(state_file), 'ant.msgpack'),
+            os.path.join(os.path.dirname(state_file), 'pusher.msgpack'))
   state['args']['command_period'] = 1.0
   with open(state_file, 'w') as f:
     json.dump(state, f)
