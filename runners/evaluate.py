@@ -109,8 +109,9 @@ class EvalArgs:
   pairs (PATH a run or checkpoint directory, as --checkpoint): e.g. the
   ravine's curriculum stages composed before their joint run, `--checkpoint
   CROSSERS_RUN --stage joint --policy-from pusher=PUSHERS_RUN`. Both must
-  drive the same lower layer at the same command period, and the evaluated
-  task must have the species. Saved with each model's figures."""
+  drive the same lower layer at the same command period and read the
+  species' observations alike, and the evaluated task must have the
+  species. Saved with each model's figures."""
 
   def __post_init__(self):
     if not self.checkpoint:
