@@ -282,40 +282,38 @@ def test_an_old_flat_config_loads_passes_the_resume_check_and_plays(
         checkpoint=(run,), policy_from=(f'ant={other}',)))
   os.rename(str(tmp_path / 'ant.msgpack'),
             os.path.join(os.path.dirname(state_file), 'ant.msgpack'))
+  keys = list(state['species'][0]['observation_keys'])
+
+  def rewrite(name, observation_keys=keys, command_period=0.5):
+    """The other checkpoint with its one species named `name` (its
+    parameters' file renamed alike), reading `observation_keys`."""
+    directory = os.path.dirname(state_file)
+    os.rename(os.path.join(directory, f'{state["species"][0]["name"]}'
+                           '.msgpack'),
+              os.path.join(directory, f'{name}.msgpack'))
+    state['species'][0].update(name=name,
+                               observation_keys=list(observation_keys))
+    state['args']['command_period'] = command_period
+    with open(state_file, 'w') as f:
+      json.dump(state, f)
+
   def refused(name, message):
     with pytest.raises(ValueError, match=f'--policy-from {name}=.*{message}'):
       evaluate.load_model(run, evaluate.EvalArgs(
           checkpoint=(run,), policy_from=(f'{name}={other}',)))
   refused('pusher', r"no policy for species 'pusher' there \(it has "
                     r"\['ant'\]\)")
-  # A species the evaluated task (transport: only Ants) does not have.
-  state['species'][0]['name'] = 'pusher'
-  os.rename(os.path.join(os.path.dirname(state_file), 'ant.msgpack'),
-            os.path.join(os.path.dirname(state_file), 'pusher.msgpack'))
-  with open(state_file, 'w') as f:
-    json.dump(state, f)
+  rewrite('pusher')  # A species the evaluated task (transport) lacks.
   refused('pusher', r"the evaluated task has no species 'pusher' \(it has "
                     r"\['ant'\]\)")
-  state['species'][0]['name'] = 'ant'
-  state['species'][0]['observation_keys'] = ['proprioception']
-  os.rename(os.path.join(os.path.dirname(state_file), 'pusher.msgpack'),
-            os.path.join(os.path.dirname(state_file), 'ant.msgpack'))
-  with open(state_file, 'w') as f:
-    json.dump(state, f)
+  rewrite('ant', observation_keys=['proprioception'])
   refused('ant', r"it reads the observations \['proprioception'\]")
-  state['species'][0]['name'] = 'pusher'
-  os.rename(os.path.join(os.path.dirname(state_file), 'ant.msgpack'),
-            os.path.join(os.path.dirname(state_file), 'pusher.msgpack'))
-  state['args']['command_period'] = 1.0
-  with open(state_file, 'w') as f:
-    json.dump(state, f)
-  refused('pusher', r'command period \(s\) is 1.0 there, 0.5 in ')
+  rewrite('ant', command_period=1.0)
+  refused('ant', r'command period \(s\) is 1.0 there, 0.5 in ')
+  rewrite('ant')
   with open(os.path.join(other, 'controller', 'config.json'), 'a') as f:
     f.write('\n')  # Another file, to the byte.
-  state['args']['command_period'] = 0.5
-  with open(state_file, 'w') as f:
-    json.dump(state, f)
-  refused('pusher', 'another lower layer than')
+  refused('ant', 'another lower layer than')
 
 
 def test_the_clis_check_their_flags_without_jax_or_mujoco():
