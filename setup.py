@@ -55,6 +55,8 @@ setuptools.setup(
         # The TensorBoard viewer for a run's events (tensorboardX writes
         # them and is installed anyway).
         "tensorboard": ["tensorboard"],
+        # benchmarks/profile_training.py samples a running training's actor.
+        "profile": ["py-spy"],
         "test": ["pytest", "pettingzoo>=1.24", "gymnasium>=0.29"],
     },
     entry_points={

@@ -17,9 +17,20 @@ median over the blocks of raw time / measured time. Prints:
   environment + lower layer, copy by copy / raw
                                    (each copy's `CommandWrapper.step`)
   pipeline with N actors / (N x raw), N = 1, 2     (target >= 0.60 at 2)
-    an actor's own rollout / raw    (its rollouts' steps over their time in
-                                     the actor: the pipeline without waits)
-  the learner's share of an update with the most actors
+    = an actor's rollout per CPU second / raw   (what its code makes of a
+                                                 core)
+      x its CPU share while it collects         (contention)
+      x the share of the wall it collects       (the rest it waits: the
+                                                 learner, the slowest
+                                                 actor, transfers)
+    (an actor's own rollout / raw: per second of its rollouts)
+  the learner's share of the wall with the most actors
+
+The pipeline's rate is over the wall time from the first update's end to
+the last's, all of `coop-train`'s loop (metrics and checkpoints too), and
+factors exactly into the three lines under it (the actors' own clocks,
+`Rollout.seconds` and `Rollout.cpu_seconds`). Its raw is the one-core raw
+rate; the pipeline's trajectories are its policy's, not the replayed ones.
 
 `--actors 1 2 4 8 14` measures the pipeline for those actor counts instead
 (the scaling curve, on a machine with that many cores; the one-core raw
@@ -160,22 +171,35 @@ def one_core(args):
 
 
 def pipeline(args, actors, logdir):
-  """(env steps/s, learner's share, an actor's own env steps/s) of
-  coop-train's loop with `actors`.
+  """coop-train's loop with `actors`: {'rate': env steps/s, 'learn': the
+  learner's share of the wall, 'own': an actor's env steps per second of
+  its rollouts, 'own_cpu': per CPU second of them, 'cpu_share': CPU
+  seconds / seconds of the rollouts, 'collecting': the actors' rollout
+  seconds / (actors x wall)}.
 
-  An actor's own rate is its rollouts' env steps over the seconds they took
-  in the actor (`Rollout.seconds`), over every actor: what the pipeline's
-  rate would be per actor with no waiting, transfer or learning between
-  rollouts.
+  The rate is over the wall time between the first update's end and the
+  last's (everything the loop does: rollouts, learner steps, metrics,
+  checkpoints). It factors exactly as
+      rate / (actors x raw) = own_cpu / raw x cpu_share x collecting:
+  what an actor's code makes of a core, how much of a core it gets while it
+  collects, and how much of the time it collects at all (the rest it waits
+  for the learner, the slowest actor, transfers). `Rollout.seconds` and
+  `Rollout.cpu_seconds` are the actor's own clocks.
   """
-  rows, rollouts = [], []
+  rows, rollouts, ends = [], [], []
   collect = actor_pool.RayPool.collect
 
   def recording(pool, *a, **kw):
     results = collect(pool, *a, **kw)
-    rollouts.append([(r.env_steps, getattr(r, 'seconds', float('nan')))
-                     for r in results])  # Older commits: no seconds.
+    rollouts.append([(r.env_steps, getattr(r, 'seconds', float('nan')),
+                      getattr(r, 'cpu_seconds', float('nan')))
+                     for r in results])  # Older commits lack the clocks.
     return results
+
+  def on_update(update, row, pool):
+    del update, pool
+    ends.append(time.perf_counter())
+    rows.append(row)
   train_args = _train_args(args, actors, logdir)
   per_update = (actors * args.envs_per_actor
                 * train_args.hierarchy.sequence_length
@@ -186,16 +210,18 @@ def pipeline(args, actors, logdir):
   # docs/performance.md) name the parameter on_iteration.
   actor_pool.RayPool.collect = recording
   try:
-    learner_loop.train(train_args, lambda u, row, pool: rows.append(row))
+    learner_loop.train(train_args, on_update)
   finally:
     actor_pool.RayPool.collect = collect
-  rows = rows[1:]  # Without the first update.
-  steps = sum(r['sps'] * (r['time/collect'] + r['time/learn']) for r in rows)
-  seconds = sum(r['time/collect'] + r['time/learn'] for r in rows)
-  learn = sum(r['time/learn'] for r in rows)
-  own = [pair for update in rollouts[1:] for pair in update]
-  own_rate = sum(n for n, _ in own) / sum(t for _, t in own)
-  return steps / seconds, learn / seconds, own_rate
+  # Without the first update (start-up, compilation).
+  wall = ends[-1] - ends[0]
+  own = [r for update in rollouts[1:] for r in update]
+  steps, seconds, cpu = (sum(column) for column in zip(*own))
+  learn = sum(r['time/learn'] for r in rows[1:])
+  return {'rate': steps / wall, 'learn': learn / wall,
+          'own': steps / seconds, 'own_cpu': steps / cpu,
+          'cpu_share': cpu / seconds,
+          'collecting': seconds / (actors * wall)}
 
 
 def _train_args(args, actors, logdir, **overrides):
@@ -246,8 +272,9 @@ def main(argv=None):
       pipelines[n] = pipeline(args, n, os.path.join(tmp, str(n)))
       # As it goes: a long scaling curve cut short keeps what it measured.
       print(f'pipeline, {n} actor{"s" * (n > 1)}: '
-            f'{pipelines[n][0]:.0f} env steps/s (an actor\'s own rollout: '
-            f'{pipelines[n][2]:.0f} env steps/s)', flush=True)
+            f'{pipelines[n]["rate"]:.0f} env steps/s (an actor\'s own '
+            f'rollout: {pipelines[n]["own"]:.0f} env steps/s, '
+            f'{pipelines[n]["own_cpu"]:.0f} per CPU second)', flush=True)
   print(f'{args.task}, {args.n_agents} agents, {args.envs_per_actor} copies '
         f'per actor, {os.cpu_count()} CPUs; raw {raw:.0f} control steps/s '
         'on one core')
@@ -258,15 +285,20 @@ def main(argv=None):
       ('env + lower layer, lockstep / raw', single['lockstep'], '>= 0.70'),
       ('env + lower layer, copy by copy / raw', single['copy_by_copy'], ''),
   ]
-  for n, (rate, _, own_rate) in pipelines.items():
-    lines.append((f'pipeline, {n} actor{"s" * (n > 1)} / ({n} x raw)',
-                  rate / (n * raw), '>= 0.60' if n == 2 else ''))
-    lines.append(("  an actor's own rollout / raw", own_rate / raw, ''))
+  for n, p in pipelines.items():
+    lines += [
+        (f'pipeline, {n} actor{"s" * (n > 1)} / ({n} x raw)',
+         p['rate'] / (n * raw), '>= 0.60' if n == 2 else ''),
+        ("  = an actor's rollout per CPU second / raw", p['own_cpu'] / raw,
+         ''),
+        ('    x its CPU share while it collects', p['cpu_share'], ''),
+        ('    x the share of the wall it collects', p['collecting'], ''),
+        ("  (an actor's own rollout / raw)", p['own'] / raw, '')]
   most = max(pipelines)
-  lines.append((f"learner's share of a {most}-actor update",
-                pipelines[most][1], ''))
+  lines.append((f"learner's share of the wall, {most} actors",
+                pipelines[most]['learn'], ''))
   for name, value, target in lines:
-    print(f'{name:42s} {value:5.2f}  {target}')
+    print(f'{name:46s} {value:5.2f}  {target}')
 
 
 if __name__ == '__main__':

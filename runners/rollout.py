@@ -211,6 +211,9 @@ class Rollout(NamedTuple):
     episodes: metric dicts of the episodes that ended during the rollout.
     env_steps: low-level steps taken by all copies together.
     seconds: wall time of the collection.
+    cpu_seconds: CPU time this process spent in it (all its threads; an
+      actor is single-threaded), so `cpu_seconds / seconds` is the share of
+      a core it got while collecting.
   """
   worker: int
   update: int
@@ -218,6 +221,7 @@ class Rollout(NamedTuple):
   episodes: list[dict[str, Any]]
   env_steps: int
   seconds: float
+  cpu_seconds: float
 
 
 class RolloutWorker:
@@ -262,7 +266,7 @@ class RolloutWorker:
       update: returned as is; the caller's name for `variables`.
       spec: the environments, if the constructor had none (used once).
     """
-    start = time.perf_counter()
+    start, cpu_start = time.perf_counter(), time.process_time()
     if self._batch is None:
       if spec is None:
         raise ValueError('This RolloutWorker was made without an EnvSpec: '
@@ -301,7 +305,8 @@ class RolloutWorker:
     batches = {name: actor.take_rollout()
                for name, actor in self._actors.items()}
     return Rollout(self._index, update, batches, episodes, env_steps,
-                   time.perf_counter() - start)
+                   time.perf_counter() - start,
+                   time.process_time() - cpu_start)
 
   def close(self) -> None:
     if self._batch is not None:

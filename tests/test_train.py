@@ -6,6 +6,7 @@ import os
 import shutil
 import signal
 import threading
+import time
 
 import imageio
 import jax
@@ -28,6 +29,7 @@ from runners import config as config_lib
 from runners import envs as envs_lib
 from runners import evaluate
 from runners import learner_loop
+from runners import rollout
 from runners import run_dir
 from runners import train
 from runners import video as video_lib
@@ -224,6 +226,30 @@ def test_best_checkpoint_holds_the_best_full_window(controller, tmp_path,
   assert tuple(newest['best_score']) == max(scores)
   evaluate.main(['--checkpoint', best, '--episodes', '1', '--envs', '1'])
   assert 'success rate' in capsys.readouterr().out
+
+
+def test_a_rollout_reports_its_cpu_time_apart_from_its_wall_time(
+    controller, tmp_path, monkeypatch):
+  """`Rollout.cpu_seconds` is the actor's CPU time, not its wall time: a
+  rollout that waits 50 ms per command shows the waits in `seconds` only."""
+  args = _args(tmp_path, controller)
+  spec = learner_loop.environment_spec(args)
+  layout, *_ = learner_loop.probe(spec, args.hierarchy)
+  variables = learner_loop.actor_variables(
+      learner_loop.make_learners(args.hierarchy, layout))
+  worker = rollout.RolloutWorker(spec, args.hierarchy, 0, 0, 2)
+  worker.collect(variables, 0)  # Compilation.
+  step = rollout.EnvBatch.step
+
+  def waiting_step(self, actions):
+    time.sleep(0.05)
+    return step(self, actions)
+  monkeypatch.setattr(rollout.EnvBatch, 'step', waiting_step)
+  result = worker.collect(variables, 1)
+  worker.close()
+  waits = 0.05 * args.hierarchy.sequence_length
+  assert result.env_steps == STEPS
+  assert 0 < result.cpu_seconds < result.seconds - 0.8 * waits
 
 
 def test_missing_controller_says_how_to_make_one(tmp_path):
