@@ -27,6 +27,7 @@ resumed run collects what is left of total_steps at its own batch
 size. Ctrl-C / SIGTERM stop after the current update with a
 checkpoint; `--resume` continues from the newest one.
 """
+import concurrent.futures
 import dataclasses
 import math
 import os
@@ -152,6 +153,29 @@ def actor_variables(learners) -> dict[str, dict[str, Any]]:
           for name, learner in learners.items()}
 
 
+def step_learners(learners, results, threads=None) -> dict[str, float]:
+  """One update of every species' learner on its rows of `results` (in
+  actor order); returns their metrics as one row (`learner/<species>/...`).
+
+  With `threads` (an executor), the species' updates run at the same time:
+  each is one compiled XLA call that releases the GIL and alone leaves
+  cores idle (`benchmarks/learner_threads.py`, docs/performance.md). The
+  learners share nothing, so the numbers are those of one after the other.
+  """
+  def step(name):
+    batch = types.concatenate([r.batches[name] for r in results])
+    return jax.device_get(learners[name].step(batch))
+  if threads is None:
+    metrics = {name: step(name) for name in learners}
+  else:
+    futures = {name: threads.submit(step, name) for name in learners}
+    metrics = {name: future.result() for name, future in futures.items()}
+  row = {}
+  for name in learners:  # The species' order, whatever finished first.
+    row.update(metrics_lib.learner_row(name, metrics[name]))
+  return row
+
+
 def make_learners(config, layout) -> dict[str, Any]:
   """A fresh learner per species: {species name: HierarchyLearner}."""
   learners = {}
@@ -250,12 +274,14 @@ def _train(args, checkpoint, on_update, deadline):
                                   'window': window.state(),
                                   'best_score': best_score}, score)
 
-  pool = None
+  pool = threads = None
   # Each checkpoint is written while the next update is collected; `close`
   # waits for the last (checkpoints.Writer).
   writer = checkpoints.Writer(args.logdir, args.keep_checkpoints)
   try:
     pool = _make_pool(args, spec, config, counters['update'])
+    if len(learners) > 1:  # The species' updates at the same time.
+      threads = concurrent.futures.ThreadPoolExecutor(len(learners))
     with run_dir.GracefulStop(deadline) as stop:
       while counters['update'] < updates and not stop.requested:
         tick = time.perf_counter()
@@ -263,12 +289,8 @@ def _train(args, checkpoint, on_update, deadline):
         results = pool.collect(variables, counters['update'])
         collected = time.perf_counter()
         assert all(r.update == counters['update'] for r in results)
-        losses = {}
         learning = True  # Learners change now: no checkpoint on error.
-        for name, learner in learners.items():
-          batch = types.concatenate([r.batches[name] for r in results])
-          losses.update(metrics_lib.learner_row(
-              name, jax.device_get(learner.step(batch))))
+        losses = step_learners(learners, results, threads)
         seconds = time.perf_counter() - tick
         steps = sum(r.env_steps for r in results)
         episodes = [e for r in results for e in r.episodes]
@@ -318,6 +340,8 @@ def _train(args, checkpoint, on_update, deadline):
   finally:
     progress.close()
     log.close()
+    if threads is not None:
+      threads.shutdown()
     try:
       if pool is not None:
         pool.close()

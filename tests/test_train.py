@@ -1,5 +1,6 @@
 """coop-train and coop-eval on tiny budgets: every variant learns in one
 process, checkpoints resume, Ray actors collect and survive `kill -9`."""
+import concurrent.futures
 import csv
 import dataclasses
 import os
@@ -250,6 +251,33 @@ def test_a_rollout_reports_its_cpu_time_apart_from_its_wall_time(
   waits = 0.05 * args.hierarchy.sequence_length
   assert result.env_steps == STEPS
   assert 0 < result.cpu_seconds < result.seconds - 0.8 * waits
+
+
+def test_species_learners_in_threads_learn_what_they_learn_in_turn(
+    controller, tmp_path):
+  """The ravine's two species updated at the same time (`step_learners`
+  with an executor) end with the parameters and metrics of updating them
+  one after the other."""
+  args = _args(tmp_path, controller, task='ravine')
+  spec = learner_loop.environment_spec(args)
+  layout, *_ = learner_loop.probe(spec, args.hierarchy)
+  in_turn, threaded = (learner_loop.make_learners(args.hierarchy, layout)
+                       for _ in range(2))
+  assert len(in_turn) == 2
+  worker = rollout.RolloutWorker(spec, args.hierarchy, 0, 0, 2)
+  results = [worker.collect(learner_loop.actor_variables(in_turn), 0)]
+  worker.close()
+  with concurrent.futures.ThreadPoolExecutor(2) as threads:
+    for _ in range(2):
+      row = learner_loop.step_learners(in_turn, results)
+      assert learner_loop.step_learners(threaded, results, threads) == row
+  assert list(row) == [k for name in in_turn for k in row
+                       if k.startswith(f'learner/{name}/')]
+  for name in in_turn:
+    params = [jax.device_get(learners[name].get_variables(['params'])[0])
+              for learners in (in_turn, threaded)]
+    for a, b in zip(*map(jax.tree.leaves, params)):
+      np.testing.assert_array_equal(a, b)
 
 
 def test_missing_controller_says_how_to_make_one(tmp_path):
