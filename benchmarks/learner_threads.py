@@ -7,8 +7,9 @@ training defaults' batch for 2 actors: one actor's rollout of 16 copies,
 its rows taken twice. The two ways of `learner_loop.step_learners`, each
 update ending with the metrics on the host, alternate for `--rounds`;
 prints each round's seconds and the median ratio in turn / at the same
-time. Run it on an otherwise idle machine: it measures how much of the
-learner's phase a second core takes off.
+time (each way goes first in every other round). Run it on an otherwise
+idle machine: it measures how much of the learner's phase a second core
+takes off.
 """
 import argparse
 import concurrent.futures
@@ -46,7 +47,8 @@ def main(argv=None):
       learner_loop.step_learners(learners, results, way)
     seconds = {name: [] for name in ways}
     for r in range(args.rounds):
-      for name, way in ways.items():
+      # Each first in every other round.
+      for name, way in sorted(ways.items(), reverse=bool(r % 2)):
         begin = time.perf_counter()
         learner_loop.step_learners(learners, results, way)
         seconds[name].append(time.perf_counter() - begin)

@@ -10,19 +10,25 @@ one window of `--seconds`:
    coop-train, coop-paper, runners.train or runners.paper), Ray's own
    processes, everything else (other work, kernel threads) and the idle
    time, in cores (CPU seconds per second of the window);
-2. one actor sampled by py-spy (`pip install py-spy`; it reads the process
+2. the time by phase, sampled every 0.1 s: every actor running (at least
+   half of the interval), some of them (the others have finished their
+   rollout and wait), the driver alone (the learner's update, between
+   rollouts), none; with the machine's idle cores in each;
+3. one actor sampled by py-spy (`pip install py-spy`; it reads the process
    without stopping it) over the same window: the share of its samples in
    each function on the stack (inclusive), i.e. of the time it was running
    Python or the native code under it. MuJoCo's calls sit under
    `SubstepRunner.run`, the lower layer's under `Controller.act`.
 
 It measures the real training (its policy's trajectories, its contention)
-instead of a replay, so it needs nothing but the running process; it takes
-a little of one core for the sampling.
+instead of a replay, so it needs nothing but the running process; the
+sampling takes a few percent of one core ("this profile"). Processes that
+start during the window (an actor Ray restarts) are not counted.
 """
 import argparse
 import collections
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -30,6 +36,11 @@ import time
 
 DRIVERS = ('coop-train', 'coop-paper', 'runners.train', 'runners.paper')
 ACTOR = 'ray::RolloutWorker'
+RAY_SERVERS = ('gcs_server', 'raylet')
+INTERVAL = 0.1
+"""Seconds between the phase samples."""
+PHASES = ('every actor collecting', 'some actors collecting',
+          'driver only (the learner)', 'none of them')
 
 
 def _processes():
@@ -69,24 +80,40 @@ def _idle_ticks():
 
 
 def _group(pid, name, command, driver):
-  if name == 'py-spy':
-    return 'this profile (py-spy)'
   if command.startswith(ACTOR) or name.startswith('ray::RolloutWor'):
     return 'actors'
   if pid == driver:
     return 'driver'
-  if 'ray' in command.split(' ')[0] or '/ray/' in command or name.startswith(
-      'ray::'):
+  if (name in RAY_SERVERS or name.startswith('ray::')
+      or '/site-packages/ray/' in command):
     return "Ray's processes"
   return 'other (incl. kernel)'
 
 
+def _parent(pid):
+  try:
+    with open(f'/proc/{pid}/stat') as f:
+      return int(f.read().rsplit(')', 1)[1].split()[1])
+  except (OSError, IndexError, ValueError):
+    return None
+
+
 def _find_driver(processes):
-  own = os.getpid()
-  found = [pid for pid, (_, command) in processes.items()
-           if pid != own and 'profile_training' not in command
-           and any(d in command for d in DRIVERS)]
-  return min(found) if found else None
+  """The process that started the local Ray instance (the parent of its
+  GCS server and raylet) when its command line is a training's; else the
+  one Python process whose command line is (wrappers such as `timeout` or
+  a shell also name the command); else None."""
+  def is_training(pid):
+    return pid in processes and any(d in processes[pid][1] for d in DRIVERS)
+  parents = {_parent(pid) for pid, (name, _) in processes.items()
+             if name in RAY_SERVERS}
+  found = sorted(pid for pid in parents if is_training(pid))
+  if not found:
+    found = sorted(pid for pid, (name, command) in processes.items()
+                   if pid != os.getpid() and is_training(pid)
+                   and (name.startswith('python') or name.startswith('coop-'))
+                   and 'profile_training' not in command)
+  return found[0] if len(found) == 1 else None
 
 
 def _inclusive_shares(raw_path):
@@ -102,6 +129,40 @@ def _inclusive_shares(raw_path):
       for function in {frame.split(' (')[0] for frame in stack.split(';')}:
         inclusive[function] += int(count)
   return total, inclusive
+
+
+def _phases(spy, actors, driver, hz):
+  """Until `spy` ends, every `INTERVAL`: which of the training's processes
+  ran at least half of the interval, and the machine's idle CPU meanwhile.
+  Returns {phase: [seconds, idle CPU seconds]}."""
+  out = {phase: [0.0, 0.0] for phase in PHASES}
+  pids = [*actors, driver]
+  last, last_idle = _cpu_ticks(pids), _idle_ticks()
+  last_time = time.perf_counter()
+  while spy.poll() is None:
+    time.sleep(INTERVAL)
+    ticks, idle, now = _cpu_ticks(pids), _idle_ticks(), time.perf_counter()
+    seconds = now - last_time
+    busy = {pid: (ticks.get(pid, 0) - last.get(pid, 0)) / hz >= seconds / 2
+            for pid in pids}
+    running = sum(busy[pid] for pid in actors)
+    if running == len(actors):
+      phase = PHASES[0]
+    elif running:
+      phase = PHASES[1]
+    else:
+      phase = PHASES[2] if busy[driver] else PHASES[3]
+    out[phase][0] += seconds
+    out[phase][1] += (idle - last_idle) / hz
+    last, last_idle, last_time = ticks, idle, now
+  return out
+
+
+def _own_cpu_seconds():
+  """CPU seconds of this process and its reaped children (py-spy)."""
+  return sum(r.ru_utime + r.ru_stime for r in (
+      resource.getrusage(resource.RUSAGE_SELF),
+      resource.getrusage(resource.RUSAGE_CHILDREN)))
 
 
 def main(argv=None):
@@ -121,6 +182,9 @@ def main(argv=None):
     sys.exit(f'No {ACTOR} process is running: start a training first '
              '(coop-train with --actors >= 1).')
   driver = args.driver or _find_driver(processes)
+  if driver is None:
+    print('No single training process found (give --driver PID): the '
+          "driver's share is counted under 'other'.", file=sys.stderr)
   hz = os.sysconf('SC_CLK_TCK')
   with tempfile.TemporaryDirectory() as tmp:
     raw_path = os.path.join(tmp, 'actor.raw')
@@ -132,12 +196,16 @@ def main(argv=None):
           stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     except FileNotFoundError:
       sys.exit('py-spy is not installed: pip install py-spy')
-    processes = _processes()  # With py-spy.
+    processes = {pid: p for pid, p in _processes().items()
+                 if pid not in (os.getpid(), spy.pid)}  # Counted apart.
     before, idle_before = _cpu_ticks(processes), _idle_ticks()
+    own_before = _own_cpu_seconds()
     begin = time.perf_counter()
+    phases = _phases(spy, actors, driver, hz)
     _, error = spy.communicate()
     window = time.perf_counter() - begin
     after, idle_after = _cpu_ticks(processes), _idle_ticks()
+    own = _own_cpu_seconds() - own_before
     if spy.returncode or not os.path.exists(raw_path):
       sys.exit(f'py-spy failed ({spy.returncode}): {error.strip()}')
     total, inclusive = _inclusive_shares(raw_path)
@@ -146,15 +214,21 @@ def main(argv=None):
     name, command = processes[pid]
     cores[_group(pid, name, command, driver)] += (
         (after[pid] - before[pid]) / hz / window)
+  cores['this profile (with py-spy)'] = own / window
   cores['idle'] = (idle_after - idle_before) / hz / window
   print(f'{os.cpu_count()} CPUs, {window:.1f} s window; {len(actors)} '
         f'actors, driver {driver}')
   print('cores used (CPU seconds per second):')
   for group in ('actors', 'driver', "Ray's processes",
-                'other (incl. kernel)', 'this profile (py-spy)', 'idle'):
+                'other (incl. kernel)', 'this profile (with py-spy)', 'idle'):
     per_actor = (f'  ({cores[group] / len(actors):.2f} per actor)'
                  if group == 'actors' else '')
-    print(f'  {group:22s} {cores[group]:5.2f}{per_actor}')
+    print(f'  {group:26s} {cores[group]:5.2f}{per_actor}')
+  sampled = sum(seconds for seconds, _ in phases.values()) or 1.0
+  print(f'time by phase (sampled every {INTERVAL} s), idle cores in it:')
+  for phase, (seconds, idle) in phases.items():
+    print(f'  {phase:27s} {seconds / sampled:5.2f} of the time, '
+          f'{idle / seconds if seconds else 0.0:4.2f} idle cores')
   print(f'actor {actors[0]}: {total} samples in {window:.0f} s '
         f'({total / (args.rate * window):.2f} of the window running); '
         'share of them with the function on the stack:')

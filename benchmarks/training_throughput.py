@@ -171,11 +171,12 @@ def one_core(args):
 
 
 def pipeline(args, actors, logdir):
-  """coop-train's loop with `actors`: {'rate': env steps/s, 'learn': the
-  learner's share of the wall, 'own': an actor's env steps per second of
-  its rollouts, 'own_cpu': per CPU second of them, 'cpu_share': CPU
-  seconds / seconds of the rollouts, 'collecting': the actors' rollout
-  seconds / (actors x wall)}.
+  """The pipeline's rate and its factors, `coop-train`'s loop with `actors`.
+
+  Returns {'rate': env steps/s, 'learn': the learner's share of the wall,
+  'own': an actor's env steps per second of its rollouts, 'own_cpu': per
+  CPU second of them, 'cpu_share': CPU seconds / seconds of the rollouts,
+  'collecting': the actors' rollout seconds / (actors x wall)}.
 
   The rate is over the wall time between the first update's end and the
   last's (everything the loop does: rollouts, learner steps, metrics,
@@ -251,6 +252,9 @@ def main(argv=None):
   args = parser.parse_args(argv)
   if min(args.actors) < 1:
     parser.error(f'--actors must be >= 1, got {args.actors}')
+  if args.updates < 2:
+    parser.error(f'--updates must be >= 2 (the first is left out), got '
+                 f'{args.updates}')
   if args.one_core:
     print(json.dumps(one_core(args)))
     return

@@ -15,7 +15,8 @@ One update (number u):
      (`actor_pool.RayPool`);
   3. each species' learner trains once on the union of its rows from all
      actors (`types.concatenate`, in actor order, so a run is reproducible
-     whatever order the rollouts arrived in);
+     whatever order the rollouts arrived in), the species at the same time
+     (`step_learners`);
   4. a row goes to metrics.csv / TensorBoard / the progress bar, and every
      `checkpoint_every` updates a checkpoint (`runners.checkpoints`).
 
@@ -158,13 +159,15 @@ def step_learners(learners, results, threads=None) -> dict[str, float]:
   actor order); returns their metrics as one row (`learner/<species>/...`).
 
   With `threads` (an executor), the species' updates run at the same time:
-  each is one compiled XLA call that releases the GIL and alone leaves
-  cores idle (`benchmarks/learner_threads.py`, docs/performance.md). The
-  learners share nothing, so the numbers are those of one after the other.
+  each is one compiled XLA call that releases the GIL, and one alone
+  leaves much of a second core idle (`benchmarks/learner_threads.py`,
+  docs/performance.md). The learners share nothing, so the numbers are
+  those of one after the other.
   """
   def step(name):
     batch = types.concatenate([r.batches[name] for r in results])
     return jax.device_get(learners[name].step(batch))
+
   if threads is None:
     metrics = {name: step(name) for name in learners}
   else:
@@ -340,8 +343,8 @@ def _train(args, checkpoint, on_update, deadline):
   finally:
     progress.close()
     log.close()
-    if threads is not None:
-      threads.shutdown()
+    if threads is not None:  # Its last update has returned or raised.
+      threads.shutdown(wait=False, cancel_futures=True)
     try:
       if pool is not None:
         pool.close()

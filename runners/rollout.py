@@ -211,9 +211,10 @@ class Rollout(NamedTuple):
     episodes: metric dicts of the episodes that ended during the rollout.
     env_steps: low-level steps taken by all copies together.
     seconds: wall time of the collection.
-    cpu_seconds: CPU time this process spent in it (all its threads; an
-      actor is single-threaded), so `cpu_seconds / seconds` is the share of
-      a core it got while collecting.
+    cpu_seconds: CPU time of this process meanwhile, all its threads (in
+      a Ray actor also Ray's own, which are nearly idle; in the driver,
+      `--actors 0`, also its background checkpoint writer): about the
+      share of a core the collection got, times `seconds`.
   """
   worker: int
   update: int
