@@ -261,23 +261,28 @@ def test_species_learners_in_threads_learn_what_they_learn_in_turn(
   args = _args(tmp_path, controller, task='ravine')
   spec = learner_loop.environment_spec(args)
   layout, *_ = learner_loop.probe(spec, args.hierarchy)
-  in_turn, threaded = (learner_loop.make_learners(args.hierarchy, layout)
-                       for _ in range(2))
-  assert len(in_turn) == 2
+  learners = learner_loop.make_learners(args.hierarchy, layout)
+  assert len(learners) == 2
   worker = rollout.RolloutWorker(spec, args.hierarchy, 0, 0, 2)
-  results = [worker.collect(learner_loop.actor_variables(in_turn), 0)]
+  results = [worker.collect(learner_loop.actor_variables(learners), 0)]
   worker.close()
+  start = {name: learner.save() for name, learner in learners.items()}
+
+  def two_updates(threads=None):
+    """From `start`: the rows and the parameters after two updates."""
+    for name, learner in learners.items():
+      learner.restore(start[name])
+    rows = [learner_loop.step_learners(learners, results, threads)
+            for _ in range(2)]
+    return rows, jax.device_get(learner_loop.actor_variables(learners))
+  rows, variables = two_updates()
   with concurrent.futures.ThreadPoolExecutor(2) as threads:
-    for _ in range(2):
-      row = learner_loop.step_learners(in_turn, results)
-      assert learner_loop.step_learners(threaded, results, threads) == row
-  assert list(row) == [k for name in in_turn for k in row
-                       if k.startswith(f'learner/{name}/')]
-  for name in in_turn:
-    params = [jax.device_get(learners[name].get_variables(['params'])[0])
-              for learners in (in_turn, threaded)]
-    for a, b in zip(*map(jax.tree.leaves, params)):
-      np.testing.assert_array_equal(a, b)
+    threaded_rows, threaded = two_updates(threads)
+  assert threaded_rows == rows
+  assert list(rows[1]) == [k for name in learners for k in rows[1]
+                           if k.startswith(f'learner/{name}/')]
+  for a, b in zip(*map(jax.tree.leaves, (variables, threaded))):
+    np.testing.assert_array_equal(a, b)
 
 
 def test_missing_controller_says_how_to_make_one(tmp_path):
