@@ -46,10 +46,8 @@ def main(argv=None):
   args = parser.parse_args(argv)
   train_args = config_lib.TrainArgs(task='transport', n_agents=4, actors=1,
                                     progress=False)
-  spec = learner_loop.environment_spec(train_args)
+  spec, _, learners = learner_loop.fresh_learners(train_args)
   config = train_args.hierarchy
-  layout, *_ = learner_loop.probe(spec, config)
-  learners = learner_loop.make_learners(config, layout)
 
   fresh = learner_loop.actor_variables(learners)
   copies = train_args.envs_per_actor

@@ -32,11 +32,8 @@ def main(argv=None):
   args = parser.parse_args(argv)
   train_args = config_lib.train_args(task='ravine', n_agents=2, actors=2,
                                      progress=False)
-  spec = learner_loop.environment_spec(train_args)
-  config = train_args.hierarchy
-  layout, *_ = learner_loop.probe(spec, config)
-  learners = learner_loop.make_learners(config, layout)
-  worker = rollout.RolloutWorker(spec, config, 0, 0,
+  spec, _, learners = learner_loop.fresh_learners(train_args)
+  worker = rollout.RolloutWorker(spec, train_args.hierarchy, 0, 0,
                                  train_args.envs_per_actor)
   result = worker.collect(learner_loop.actor_variables(learners), 0)
   worker.close()

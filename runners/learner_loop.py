@@ -179,6 +179,14 @@ def step_learners(learners, results, threads=None) -> dict[str, float]:
   return row
 
 
+def fresh_learners(args: config_lib.TrainArgs):
+  """(spec, species layout, {species: fresh learner}) of a run of `args`,
+  before any checkpoint or --init-from (benchmarks and tests)."""
+  spec = environment_spec(args)
+  layout = probe(spec, args.hierarchy)[0]
+  return spec, layout, make_learners(args.hierarchy, layout)
+
+
 def make_learners(config, layout) -> dict[str, Any]:
   """A fresh learner per species: {species name: HierarchyLearner}."""
   learners = {}

@@ -234,10 +234,8 @@ def test_a_rollout_reports_its_cpu_time_apart_from_its_wall_time(
   """`Rollout.cpu_seconds` is the actor's CPU time, not its wall time: a
   rollout that waits 100 ms per command shows the waits in `seconds` only."""
   args = _args(tmp_path, controller)
-  spec = learner_loop.environment_spec(args)
-  layout, *_ = learner_loop.probe(spec, args.hierarchy)
-  variables = learner_loop.actor_variables(
-      learner_loop.make_learners(args.hierarchy, layout))
+  spec, _, learners = learner_loop.fresh_learners(args)
+  variables = learner_loop.actor_variables(learners)
   worker = rollout.RolloutWorker(spec, args.hierarchy, 0, 0, 2)
   worker.collect(variables, 0)  # Compilation.
   step = rollout.EnvBatch.step
@@ -259,9 +257,7 @@ def test_species_learners_in_threads_learn_what_they_learn_in_turn(
   with an executor) end with the parameters and metrics of updating them
   one after the other."""
   args = _args(tmp_path, controller, task='ravine')
-  spec = learner_loop.environment_spec(args)
-  layout, *_ = learner_loop.probe(spec, args.hierarchy)
-  learners = learner_loop.make_learners(args.hierarchy, layout)
+  spec, _, learners = learner_loop.fresh_learners(args)
   assert len(learners) == 2
   worker = rollout.RolloutWorker(spec, args.hierarchy, 0, 0, 2)
   results = [worker.collect(learner_loop.actor_variables(learners), 0)]
@@ -408,9 +404,7 @@ def ravine_stages(tmp_path_factory, controller):
 
 
 def _joint_learners(args):
-  config = args.hierarchy
-  layout = learner_loop.probe(learner_loop.environment_spec(args), config)[0]
-  return learner_loop.make_learners(config, layout)
+  return learner_loop.fresh_learners(args)[2]
 
 
 def test_init_from_starts_each_species_from_its_stage_run(
