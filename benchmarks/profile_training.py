@@ -60,17 +60,21 @@ def _processes():
   return out
 
 
+def _stat(pid):
+  """The fields of /proc/<pid>/stat after the command's name (state,
+  parent, ...), or None when the process is gone."""
+  try:
+    with open(f'/proc/{pid}/stat') as f:
+      return f.read().rsplit(')', 1)[1].split()
+  except (OSError, IndexError):
+    return None
+
+
 def _cpu_ticks(pids):
   """{pid: user + system clock ticks} of each pid still alive."""
-  out = {}
-  for pid in pids:
-    try:
-      with open(f'/proc/{pid}/stat') as f:
-        fields = f.read().rsplit(')', 1)[1].split()
-      out[pid] = int(fields[11]) + int(fields[12])
-    except (OSError, IndexError):
-      continue
-  return out
+  stats = {pid: _stat(pid) for pid in pids}
+  return {pid: int(fields[11]) + int(fields[12])
+          for pid, fields in stats.items() if fields}
 
 
 def _idle_ticks():
@@ -91,11 +95,8 @@ def _group(pid, name, command, driver):
 
 
 def _parent(pid):
-  try:
-    with open(f'/proc/{pid}/stat') as f:
-      return int(f.read().rsplit(')', 1)[1].split()[1])
-  except (OSError, IndexError, ValueError):
-    return None
+  fields = _stat(pid)
+  return int(fields[1]) if fields else None
 
 
 def _find_driver(processes):
