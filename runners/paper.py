@@ -83,7 +83,10 @@ class PaperArgs:
   baselines: str = 'results/baselines'
   """The difficulty references printed beside the learned figures."""
   actors: int = fields.field(2, fields.NON_NEGATIVE)
-  """Actor processes per training run (0: one process, no Ray)."""
+  """Actor processes per training run (0: one process, no Ray). They
+  share a cell's environment copies per update (`Cell.copies`, 32), so
+  the number must divide it: the update, and so the cell, is the same
+  with 1, 2, 4, 8, 16 or 32 actors."""
   ray_address: str = ''
   """Join this Ray cluster (as coop-train --ray-address)."""
   episodes: int = fields.field(paper_plan.EPISODES, fields.COUNT)
@@ -134,10 +137,19 @@ def partial_directory(cell: paper_plan.Cell, args: PaperArgs) -> str:
 def train_args(cell: paper_plan.Cell, args: PaperArgs, resume: bool = False):
   """The cell's `TrainArgs` (its `coop-train` command)."""
   from runners import config as config_lib  # pylint: disable=g-import-not-at-top
+  processes = max(1, args.actors)
+  if cell.copies % processes:
+    splits = [n for n in range(1, cell.copies + 1) if cell.copies % n == 0]
+    raise ValueError(
+        f'--actors {args.actors} cannot split the {cell.copies} environment '
+        f'copies of an update of {cell.path} evenly (the plan\'s batch, '
+        f'runners.paper_plan.COPIES); use one of '
+        f'{", ".join(map(str, splits))}, or 0 (one process).')
   values = {'task': cell.task, 'agent': cell.agent,
             'n_agents': cell.n_agents, 'seed': cell.seed,
             'total_steps': budget(cell, args),
             'logdir': run_directory(cell, args), 'actors': args.actors,
+            'envs_per_actor': cell.copies // processes,
             'ray_address': args.ray_address, 'progress': args.progress,
             'resume': resume, **dict(cell.flags)}
   if cell.stage:
@@ -439,6 +451,8 @@ def run_plan(args: PaperArgs, plan=None,
   cells = [cell for cell in selected(args, plan) if not is_done(cell, args)]
   if not cells:
     return None  # Nothing to train or evaluate: no Ray either.
+  for cell in cells:  # Refuses --actors that split a cell's copies unevenly.
+    train_args(cell, args)
   # Ray before anything reads a checkpoint: orbax starts JAX, and Ray's
   # processes are not to be started from a process where JAX runs threads.
   from runners import actor_pool  # pylint: disable=g-import-not-at-top

@@ -56,6 +56,12 @@ PUSH_BUDGET = 3_000_000
 `BUDGET`: a transport model trains 15M steps in all (push 3M, then the
 joint run 12M). Without the agent-target term seeds gather at the cylinder
 within 0.5M steps and move it to the target from ~1.2M (docs/results.md)."""
+COPIES = 32
+"""Environment copies every cell collects per update, i.e. the batch of
+its PPO update: `coop-train`'s default 2 actors x 16 copies. `coop-paper`
+splits them evenly over its `--actors` (`envs_per_actor` = 32 / actors),
+so a cell trains the same algorithm on 2 cores and on a cluster; only the
+copies' random streams differ."""
 EPISODES = 100
 """Evaluation episodes per model and population (the paper: 100)."""
 EVAL_SEED = 1000
@@ -125,6 +131,8 @@ class Cell:
   """Other populations its final checkpoint is evaluated at."""
   flags: tuple[tuple[str, Any], ...] = ()
   """Other `TrainArgs` fields of the run (name, value)."""
+  copies: int = COPIES
+  """Environment copies per update, whatever the actors (`COPIES`)."""
 
   @property
   def name(self) -> str:

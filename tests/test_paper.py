@@ -45,11 +45,13 @@ def _tiny_plan(controller_dir):  # pylint: disable=redefined-outer-name
   PaperArgs')."""
   flags = tuple((k, v) for k, v in {**TINY, 'controller': controller_dir
                                     }.items()
-                if k not in ('n_agents', 'actors', 'progress'))
+                if k not in ('n_agents', 'actors', 'envs_per_actor',
+                             'progress'))
+  copies = TINY['envs_per_actor']
   return [paper_plan.Cell('table1', 'transport', 'hrl', 2, 0, 2 * STEPS,
-                          zero_shot=(3,), flags=flags),
+                          zero_shot=(3,), flags=flags, copies=copies),
           paper_plan.Cell('table1', 'transport', 'hrl', 2, 1, 2 * STEPS,
-                          flags=flags)]
+                          flags=flags, copies=copies)]
 
 
 def _args(tmp_path, **overrides):
@@ -252,6 +254,25 @@ def test_quick_runs_keep_off_the_plans_folders(tmp_path):
       paper.run_plan(paper.PaperArgs(**values), log=pytest.fail)
 
 
+def test_a_cells_update_is_the_same_whatever_the_actors(tmp_path,
+                                                        monkeypatch):
+  """--actors splits the plan's copies per update, so a cell run on more
+  cores is still the cell; a split that is not even is refused before
+  anything starts."""
+  cell = paper_plan.PLAN[0]
+  for actors, per_actor in ((0, 32), (1, 32), (2, 16), (8, 4), (32, 1)):
+    train = paper.train_args(cell, _args(tmp_path, actors=actors))
+    assert (train.actors, train.envs_per_actor) == (actors, per_actor)
+    assert train.num_actors * train.envs_per_actor == paper_plan.COPIES
+  # The default is coop-train's own (2 x 16): its command omits both.
+  assert '--envs-per-actor' not in paper.command(cell, paper.PaperArgs())
+  monkeypatch.setattr(actor_pool, 'init_ray',
+                      lambda *a, **k: pytest.fail('Ray started'))
+  with pytest.raises(ValueError, match=r'--actors 14 cannot split the 32 .*'
+                     r'use one of 1, 2, 4, 8, 16, 32'):
+    paper.run_plan(_args(tmp_path, actors=14), log=pytest.fail)
+
+
 def test_the_plan_is_the_papers():
   plan = paper_plan.PLAN
   assert len({c.name for c in plan}) == len(plan)
@@ -394,8 +415,10 @@ def test_report_rebuilds_the_tables_from_committed_results(tmp_path, capsys,
           in text)
   assert '| ravine | HRL | pushers |' not in text
   assert '| 4 | 37.5% +- 18.3 | +- 12.5 | 2/3 |' in text  # Fig. 4a.
-  assert 'coop-train --seed 1 --actors 0 --total-steps 12000000 --logdir' in text
-  assert 'coop-train --seed 1 --actors 0 --total-steps 3000000 --logdir' in text
+  assert ('coop-train --seed 1 --actors 0 --envs-per-actor 32 --total-steps '
+          '12000000 --logdir') in text
+  assert ('coop-train --seed 1 --actors 0 --envs-per-actor 32 --total-steps '
+          '3000000 --logdir') in text
   assert '# transport/hrl/n4/s1 (done)' in text
   # Into a marked block of a markdown file, again and again.
   docs = tmp_path / 'results.md'
