@@ -182,6 +182,20 @@ def train_args(**values) -> TrainArgs:
   return TrainArgs(**values, hierarchy=dataclasses.replace(hierarchy, **agent))
 
 
+def envs_per_actor(copies: int, actors: int, what: str) -> int:
+  """The environment copies each of `actors` processes steps when they
+  share `copies` (0 actors: one process steps them all), for commands that
+  fix the copies of an update and let --actors split them. Raises
+  ValueError naming the actor counts that split them evenly; `what` says
+  whose copies they are ('--num-envs 32')."""
+  processes = max(1, actors)
+  if copies % processes:
+    splits = [n for n in range(1, copies + 1) if copies % n == 0]
+    raise ValueError(f'--actors {actors} cannot split {what} evenly; use one '
+                     f'of {", ".join(map(str, splits))}, or 0 (one process).')
+  return copies // processes
+
+
 def flat_dict(values: dict[str, Any]) -> dict[str, Any]:
   """A stored `TrainArgs` dict, nested (`to_dict`) or flat (older runs), as
   {field name: value}: the names are unique, as the flags are."""

@@ -137,26 +137,29 @@ def partial_directory(cell: paper_plan.Cell, args: PaperArgs) -> str:
 def train_args(cell: paper_plan.Cell, args: PaperArgs, resume: bool = False):
   """The cell's `TrainArgs` (its `coop-train` command)."""
   from runners import config as config_lib  # pylint: disable=g-import-not-at-top
-  processes = max(1, args.actors)
-  if cell.copies % processes:
-    splits = [n for n in range(1, cell.copies + 1) if cell.copies % n == 0]
-    raise ValueError(
-        f'--actors {args.actors} cannot split the {cell.copies} environment '
-        f'copies of an update of {cell.path} evenly (the plan\'s batch, '
-        f'runners.paper_plan.COPIES); use one of '
-        f'{", ".join(map(str, splits))}, or 0 (one process).')
   values = {'task': cell.task, 'agent': cell.agent,
             'n_agents': cell.n_agents, 'seed': cell.seed,
             'total_steps': budget(cell, args),
             'logdir': run_directory(cell, args), 'actors': args.actors,
-            'envs_per_actor': cell.copies // processes,
+            'envs_per_actor': config_lib.envs_per_actor(
+                cell.copies, args.actors,
+                f'the {cell.copies} environment copies of an update of '
+                f'{cell.path} (the plan\'s batch, runners.paper_plan.COPIES)'),
             'ray_address': args.ray_address, 'progress': args.progress,
-            'resume': resume, **dict(cell.flags)}
+            'resume': resume}
   if cell.stage:
     values['stage'] = cell.stage
   if cell.init_from:
     values['init_from'] = tuple(f'{species}={folder}' for species, folder
                                 in stage_directories(cell, args))
+  # A flag may not change what the cell's own fields (or this command's)
+  # set: the cell would not be the run its name and path say.
+  own = set(values) | {'stage', 'init_from'}
+  clash = sorted(set(dict(cell.flags)) & own)
+  if clash:
+    raise ValueError(f'{cell.path}: its flags set {", ".join(clash)}, which '
+                     'the cell\'s own fields and coop-paper\'s options set.')
+  values.update(cell.flags)
   return config_lib.train_args(**values)
 
 
@@ -238,8 +241,9 @@ def other_settings(cell: paper_plan.Cell, args: PaperArgs,
   from runners import config as config_lib  # pylint: disable=g-import-not-at-top
   if saved is None:
     return ''
+  current = train_args(cell, args)  # Its errors (--actors) are the command's.
   try:
-    config_lib.check_resumable(saved, train_args(cell, args))
+    config_lib.check_resumable(saved, current)
   except ValueError as error:
     return str(error)
   started = config_lib.TrainArgs.from_dict(saved).init_sources()

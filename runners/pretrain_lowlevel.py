@@ -118,13 +118,11 @@ class Args:
       object.__setattr__(self, 'export_dir',
                          os.path.join(self.logdir, 'controller'))
     object.__setattr__(self, 'flat_sizes', tuple(self.flat_sizes))
-    if self.num_envs % max(1, self.actors):
-      raise ValueError(f'--num-envs {self.num_envs} must be divisible by '
-                       f'--actors {self.actors}.')
     if self.num_envs % self.num_minibatches:
       raise ValueError(f'--num-envs {self.num_envs} must be divisible by '
                        f'--num-minibatches {self.num_minibatches}.')
-    self.train_args()  # Checks the rest (same flags, same words).
+    self.train_args()  # Checks the rest (same flags, same words), --actors
+    # among them.
 
   def task(self) -> str:
     return PARADIGMS[self.paradigm].task
@@ -134,7 +132,8 @@ class Args:
     return config_lib.train_args(
         **_FIXED, task=self.task(), paradigm=self.paradigm,
         actors=self.actors,
-        envs_per_actor=self.num_envs // max(1, self.actors),
+        envs_per_actor=config_lib.envs_per_actor(
+            self.num_envs, self.actors, f'--num-envs {self.num_envs}'),
         total_steps=self.total_steps, seed=self.seed, logdir=self.logdir,
         ray_address=self.ray_address, resume=self.resume,
         checkpoint_every=self.checkpoint_every,

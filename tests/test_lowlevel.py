@@ -119,6 +119,8 @@ def test_pretrain_refuses_what_it_cannot_continue(tiny_run, tmp_path,
            (['--resume', '--learning-rate', '1e-3'], '--learning-rate'),
            (['--resume', '--sequence-length', '4'], '--sequence-length'),
            (['--flat-sizes', '0'], '--flat-sizes must be >= 1'),
+           (['--actors', '3'], '--actors 3 cannot split --num-envs 8 evenly; '
+            'use one of 1, 2, 4, 8, or 0'),
            (['--resume', '--logdir', str(old)], 'older coop-suite'),
            (['--export-only', '--logdir', str(old)], 'older coop-suite')]
   for more, match in cases:

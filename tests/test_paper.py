@@ -271,6 +271,23 @@ def test_a_cells_update_is_the_same_whatever_the_actors(tmp_path,
   with pytest.raises(ValueError, match=r'--actors 14 cannot split the 32 .*'
                      r'use one of 1, 2, 4, 8, 16, 32'):
     paper.run_plan(_args(tmp_path, actors=14), log=pytest.fail)
+  # --dry-run says so too, rather than calling a run of the cell another's.
+  cell_args = _args(tmp_path, actors=14)
+  _fake_run(paper.run_directory(cell, cell_args),
+            paper.train_args(cell, _args(tmp_path)), 1_000_000)
+  with pytest.raises(ValueError, match='--actors 14 cannot split'):
+    paper.dry_run(cell_args)
+
+
+def test_a_cells_flags_cannot_make_it_another_run(tmp_path):
+  """Cell.flags are merged into the cell's TrainArgs last, so one naming a
+  field the cell or coop-paper sets (here --actors' split) is refused."""
+  cell = paper_plan.PLAN[0]
+  for flag, value in (('envs_per_actor', 8), ('seed', 7), ('stage', 'push'),
+                      ('logdir', '/tmp/elsewhere')):
+    bad = dataclasses.replace(cell, flags=cell.flags + ((flag, value),))
+    with pytest.raises(ValueError, match=f'flags set {flag}, which'):
+      paper.train_args(bad, _args(tmp_path))
 
 
 def test_the_plan_is_the_papers():
