@@ -144,7 +144,7 @@ def train_args(cell: paper_plan.Cell, args: PaperArgs, resume: bool = False):
             'envs_per_actor': config_lib.envs_per_actor(
                 cell.copies, args.actors,
                 f'the {cell.copies} environment copies of an update of '
-                f'{cell.path} (the plan\'s batch, runners.paper_plan.COPIES)'),
+                f'{cell.path}'),
             'ray_address': args.ray_address, 'progress': args.progress,
             'resume': resume}
   if cell.stage:
@@ -158,7 +158,9 @@ def train_args(cell: paper_plan.Cell, args: PaperArgs, resume: bool = False):
   clash = sorted(set(dict(cell.flags)) & own)
   if clash:
     raise ValueError(f'{cell.path}: its flags set {", ".join(clash)}, which '
-                     'the cell\'s own fields and coop-paper\'s options set.')
+                     'the cell\'s own fields and coop-paper\'s options set; '
+                     'give them there, not in Cell.flags '
+                     '(runners/paper_plan.py).')
   values.update(cell.flags)
   return config_lib.train_args(**values)
 

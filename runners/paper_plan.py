@@ -130,7 +130,9 @@ class Cell:
   zero_shot: tuple[int, ...] = ()
   """Other populations its final checkpoint is evaluated at."""
   flags: tuple[tuple[str, Any], ...] = ()
-  """Other `TrainArgs` fields of the run (name, value)."""
+  """Other `TrainArgs` fields of the run (name, value); not those the
+  cell's own fields or coop-paper's options set (`paper.train_args`
+  refuses them)."""
   copies: int = COPIES
   """Environment copies per update, whatever the actors (`COPIES`)."""
 

@@ -121,8 +121,8 @@ class Args:
     if self.num_envs % self.num_minibatches:
       raise ValueError(f'--num-envs {self.num_envs} must be divisible by '
                        f'--num-minibatches {self.num_minibatches}.')
-    self.train_args()  # Checks the rest (same flags, same words), --actors
-    # among them.
+    # The rest (same flags, same words), --actors' split among them.
+    self.train_args()
 
   def task(self) -> str:
     return PARADIGMS[self.paradigm].task

@@ -271,12 +271,15 @@ def test_a_cells_update_is_the_same_whatever_the_actors(tmp_path,
   with pytest.raises(ValueError, match=r'--actors 14 cannot split the 32 .*'
                      r'use one of 1, 2, 4, 8, 16, 32'):
     paper.run_plan(_args(tmp_path, actors=14), log=pytest.fail)
-  # --dry-run says so too, rather than calling a run of the cell another's.
+  # So do a cell's status and --stash, rather than calling a run of the
+  # cell another cell's.
   cell_args = _args(tmp_path, actors=14)
   _fake_run(paper.run_directory(cell, cell_args),
             paper.train_args(cell, _args(tmp_path)), 1_000_000)
-  with pytest.raises(ValueError, match='--actors 14 cannot split'):
-    paper.dry_run(cell_args)
+  assert paper.status(cell, _args(tmp_path)).state == 'partial'
+  for call in (paper.status, paper.stash):
+    with pytest.raises(ValueError, match='^--actors 14 cannot split'):
+      call(cell, cell_args)
 
 
 def test_a_cells_flags_cannot_make_it_another_run(tmp_path):
