@@ -57,7 +57,9 @@ setuptools.setup(
         "tensorboard": ["tensorboard"],
         # benchmarks/profile_training.py samples a running training's actor.
         "profile": ["py-spy"],
-        "test": ["pytest", "pettingzoo>=1.24", "gymnasium>=0.29"],
+        # pytest-xdist: README's test command runs the suite on 2 processes.
+        "test": ["pytest", "pytest-xdist>=3.5", "pettingzoo>=1.24",
+                 "gymnasium>=0.29"],
     },
     entry_points={
         "console_scripts": [
