@@ -182,17 +182,23 @@ def train_args(**values) -> TrainArgs:
   return TrainArgs(**values, hierarchy=dataclasses.replace(hierarchy, **agent))
 
 
-def envs_per_actor(copies: int, actors: int, what: str) -> int:
+def envs_per_actor(copies: int, actors: int, what: str,
+                   copies_flag: str = '') -> int:
   """The environment copies each of `actors` processes steps when they
   share `copies` (0 actors: one process steps them all), for commands that
   fix the copies of an update and let --actors split them. Raises
   ValueError naming the actor counts that split them evenly; `what` says
-  whose copies they are ('--num-envs 32')."""
+  whose copies they are ('--num-envs 32'); where the user sets the copies
+  too, `copies_flag` (the flag, '--num-envs') makes it also name the next
+  count of copies that --actors splits."""
   processes = max(1, actors)
   if copies % processes:
     splits = [n for n in range(1, copies + 1) if copies % n == 0]
+    more = (f', or {copies_flag} {-(-copies // processes) * processes} with '
+            f'--actors {actors}' if copies_flag else '')
     raise ValueError(f'--actors {actors} cannot split {what} evenly; use one '
-                     f'of {", ".join(map(str, splits))}, or 0 (one process).')
+                     f'of {", ".join(map(str, splits))}, or 0 (one '
+                     f'process){more}.')
   return copies // processes
 
 

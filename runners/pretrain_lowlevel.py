@@ -133,7 +133,8 @@ class Args:
         **_FIXED, task=self.task(), paradigm=self.paradigm,
         actors=self.actors,
         envs_per_actor=config_lib.envs_per_actor(
-            self.num_envs, self.actors, f'--num-envs {self.num_envs}'),
+            self.num_envs, self.actors, f'--num-envs {self.num_envs}',
+            copies_flag='--num-envs'),
         total_steps=self.total_steps, seed=self.seed, logdir=self.logdir,
         ray_address=self.ray_address, resume=self.resume,
         checkpoint_every=self.checkpoint_every,
