@@ -15,6 +15,7 @@ together); the policy acts once per `command_period` seconds ('flat': every
 control step).
 """
 import dataclasses
+import math
 import os
 from typing import Any
 
@@ -183,18 +184,21 @@ def train_args(**values) -> TrainArgs:
 
 
 def envs_per_actor(copies: int, actors: int, what: str,
-                   copies_flag: str = '') -> int:
+                   copies_flag: str = '', multiple_of: int = 1) -> int:
   """The environment copies each of `actors` processes steps when they
   share `copies` (0 actors: one process steps them all), for commands that
   fix the copies of an update and let --actors split them. Raises
   ValueError naming the actor counts that split them evenly; `what` says
   whose copies they are ('--num-envs 32'); where the user sets the copies
-  too, `copies_flag` (the flag, '--num-envs') makes it also name the next
-  count of copies that --actors splits."""
+  too, `copies_flag` (the flag, '--num-envs') makes it also name the
+  smallest count of copies above `copies` that --actors splits and that is
+  a multiple of `multiple_of` (what else the command asks of the copies,
+  e.g. its --num-minibatches)."""
   processes = max(1, actors)
   if copies % processes:
     splits = [n for n in range(1, copies + 1) if copies % n == 0]
-    more = (f', or {copies_flag} {-(-copies // processes) * processes} with '
+    step = math.lcm(processes, multiple_of)
+    more = (f', or {copies_flag} {-(-copies // step) * step} with '
             f'--actors {actors}' if copies_flag else '')
     raise ValueError(f'--actors {actors} cannot split {what} evenly; use one '
                      f'of {", ".join(map(str, splits))}, or 0 (one '

@@ -134,7 +134,7 @@ class Args:
         actors=self.actors,
         envs_per_actor=config_lib.envs_per_actor(
             self.num_envs, self.actors, f'--num-envs {self.num_envs}',
-            copies_flag='--num-envs'),
+            copies_flag='--num-envs', multiple_of=self.num_minibatches),
         total_steps=self.total_steps, seed=self.seed, logdir=self.logdir,
         ray_address=self.ray_address, resume=self.resume,
         checkpoint_every=self.checkpoint_every,

@@ -1,8 +1,14 @@
 """Shared fixtures and helpers for the suite's tests."""
 
 import os
+import secrets
 
 os.environ.setdefault("MUJOCO_GL", "egl")
+# Ray's local instances authenticate with a token; without one Ray writes a
+# new ~/.ray/auth_token on its first start, and two test processes
+# (`pytest -n 2`) starting Ray at once could each write their own. Each
+# process's instances take this one from the environment instead.
+os.environ.setdefault("RAY_AUTH_TOKEN", secrets.token_hex(32))
 
 import numpy as np  # pylint: disable=g-import-not-at-top
 import pytest  # pylint: disable=g-import-not-at-top

@@ -120,7 +120,7 @@ def test_pretrain_refuses_what_it_cannot_continue(tiny_run, tmp_path,
            (['--resume', '--sequence-length', '4'], '--sequence-length'),
            (['--flat-sizes', '0'], '--flat-sizes must be >= 1'),
            (['--actors', '3'], '--actors 3 cannot split --num-envs 8 evenly; '
-            'use one of 1, 2, 4, 8, or 0 (one process), or --num-envs 9 with '
+            'use one of 1, 2, 4, 8, or 0 (one process), or --num-envs 12 with '
             '--actors 3.'),
            (['--resume', '--logdir', str(old)], 'older coop-suite'),
            (['--export-only', '--logdir', str(old)], 'older coop-suite')]
