@@ -14,6 +14,17 @@ import numpy as np  # pylint: disable=g-import-not-at-top
 import pytest  # pylint: disable=g-import-not-at-top
 
 
+@pytest.hookimpl(tryfirst=True)
+def pytest_cmdline_main(config):
+  """With -n (pytest-xdist, README's test command) each module runs whole on
+  one process unless --dist says otherwise: its module fixtures (a tiny
+  training, a Ray instance) are built once. Set here, not in pytest.ini's
+  addopts, so that a pytest without xdist still runs the suite."""
+  option = config.option
+  if getattr(option, "numprocesses", None) and option.dist == "no":
+    option.dist = "loadfile"
+
+
 @pytest.fixture(scope="session", autouse=True)
 def _compilation_cache(tmp_path_factory):
   """One persistent XLA compilation cache for the whole suite: every
