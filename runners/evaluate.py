@@ -30,6 +30,7 @@ it is played, headless, one frame per control step, with
 `coop_suite.camera.FramingCamera`. `--json` writes every
 episode's figures in marl-eval's layout (`runners.marl_eval`).
 """
+import csv
 import dataclasses
 import json
 import os
@@ -93,6 +94,17 @@ class EvalArgs:
   """Video width in pixels."""
   height: int = fields.field(480, fields.COUNT)
   """Video height in pixels."""
+  trace: str = ''
+  """CSV file to write the first evaluated episode (the filmed one with
+  --video) into, a row per control step from the first observation:
+  `time` (s), each agent's torso position `agent<i>_x`, `_y`, `_z` (m,
+  world frame, in the task's agent order: the ravine's crossers first),
+  the task's other tracked points `point<j>_x`, `_y`, `_z`
+  (`Task.tracked_positions`: transport's cylinder and target zone, the
+  corridor's slit exit, the ravine's stone), then the episode's figures so
+  far (`Task.episode_metrics`: success, return, reward terms and the
+  task's progress, e.g. the ravine's `crossed` and `bridge_error`). Empty
+  for none."""
   strip: str = ''
   """With --video: also this PNG, the filmed episode's frames at 0, 1/4,
   1/2, 3/4 and its end side by side at half size (a still for docs)."""
@@ -304,24 +316,26 @@ def copy_seeds(seed: int, num_envs: int) -> np.ndarray:
 
 
 def play(spec, config, models, seed: int, episodes: int, num_envs: int,
-         deterministic: bool = True, video: str = '', size=(640, 480)
-         ) -> list[dict]:
+         deterministic: bool = True, video: str = '', size=(640, 480),
+         trace: str = '') -> list[dict]:
   """`episodes` episode metric dicts, `num_envs` copies playing fixed
   shares, the first copy's first. With `video`, that first episode is
   filmed into the mp4 `video` at `size` (width, height) as it is played:
   the film is an evaluated episode, not a replay (a batch of another size
-  rounds the networks' outputs differently, so a replay could diverge)."""
+  rounds the networks' outputs differently, so a replay could diverge).
+  With `trace`, the same episode's positions and figures per control step
+  go to that CSV (`EvalArgs.trace`)."""
   from runners import rollout  # pylint: disable=g-import-not-at-top
   num_envs = min(num_envs, episodes)
-  filming = []
+  recording = []
 
-  def film_first(env):
-    if video and not filming:
-      env = _Filming(env, video, size)
-      filming.append(env)
+  def record_first(env):
+    if (video or trace) and not recording:
+      env = _Recording(env, video, size, trace)
+      recording.append(env)
     return env
   batch = rollout.EnvBatch(spec, config, copy_seeds(seed, num_envs),
-                           global_state=False, wrap_raw=film_first)
+                           global_state=False, wrap_raw=record_first)
   quota = [episodes // num_envs + (e < episodes % num_envs)
            for e in range(num_envs)]
   results = [[] for _ in range(num_envs)]
@@ -337,48 +351,84 @@ def play(spec, config, models, seed: int, episodes: int, num_envs: int,
   return [e for r in results for e in r]
 
 
-class _Filming:
-  """A bare environment that films itself until its first episode ends."""
+class _Recording:
+  """A bare environment that films itself into the mp4 `video` and/or
+  writes its positions and figures into the CSV `trace` (either may be
+  empty), each state once, until its first episode ends."""
 
-  def __init__(self, env, path, size):
+  def __init__(self, env, video, size, trace):
     from coop_suite import camera  # pylint: disable=g-import-not-at-top
-    from runners import video  # pylint: disable=g-import-not-at-top
+    from runners import video as video_lib  # pylint: disable=g-import-not-at-top
     self._env, self._size = env, size
     self._camera, self._render = camera.FramingCamera(), camera.render
-    self._writer = video.open_video(path, round(1 / env.control_timestep()))
+    self._writer = (video_lib.open_video(video,
+                                         round(1 / env.control_timestep()))
+                    if video else None)
+    self._trace = None
+    if trace:
+      os.makedirs(os.path.dirname(os.path.abspath(trace)), exist_ok=True)
+      self._trace = open(trace, 'w', newline='')  # pylint: disable=consider-using-with
+    self._rows = []  # The trace's; written when the episode ends.
     self.done = False
 
   def __getattr__(self, name):
     return getattr(self._env, name)
 
-  def _film(self):
-    if not self.done:
+  def _record(self):
+    if self.done:
+      return
+    if self._writer:
       self._writer.append_data(self._render(self._env, self._camera,
                                             *self._size))
+    if self._trace:
+      self._write_row()
+
+  def _write_row(self):
+    task, physics = self._env.task, self._env.physics
+    points = np.asarray(task.tracked_positions(physics), dtype=float)
+    row = {'time': round(float(physics.data.time), 6)}
+    for i, xyz in enumerate(points):
+      name = f'agent{i}' if i < task.n_agents else f'point{i - task.n_agents}'
+      row.update(zip((f'{name}_x', f'{name}_y', f'{name}_z'), map(float, xyz)))
+    row.update({k: float(v) for k, v in task.episode_metrics(physics).items()})
+    self._rows.append(row)
 
   def reset(self):
     timestep = self._env.reset()
-    self._film()
+    self._record()
     return timestep
 
   def step(self, action, observe=True):
-    return self._filmed(self._env.step(action, observe=observe))
+    return self._recorded(self._env.step(action, observe=observe))
 
   def step_outcome(self, observe=True):
     # A command layer steps in two phases (`CoopEnvironment.step_physics`
-    # passes through); a step is filmed once its outcome is known.
-    return self._filmed(self._env.step_outcome(observe))
+    # passes through); a step is recorded once its outcome is known.
+    return self._recorded(self._env.step_outcome(observe))
 
-  def _filmed(self, timestep):
-    self._film()
+  def _recorded(self, timestep):
+    self._record()
     if timestep.last() and not self.done:
       self.done = True
-      self._writer.close()
+      self._finish()
     return timestep
+
+  def _finish(self):
+    if self._writer:
+      self._writer.close()
+    if self._trace:
+      # Reward terms are summed from the first reward on: 0 before it.
+      names = list(dict.fromkeys(k for row in self._rows for k in row))
+      rows = csv.DictWriter(self._trace, fieldnames=names)
+      rows.writeheader()
+      for row in self._rows:
+        rows.writerow({k: row.get(k, 0.0 if k.startswith('reward/') else '')
+                       for k in names})
+      self._trace.close()
 
   def close(self):
     if not self.done:
-      self._writer.close()
+      self._finish()
     self._env.close()
 
 
@@ -406,15 +456,17 @@ def evaluate(args: EvalArgs, log=None) -> dict:
                    f'{config.agent}')
     played = []
     for seed in args.seeds:
-      # The first model's first episode is filmed (`play`).
-      video = args.video if not (index or played) else ''
+      # The first model's first episode is filmed and traced (`play`).
+      first = not (index or played)
+      video = args.video if first else ''
       played += play(spec, config, models, seed, args.episodes, args.envs,
-                     not args.stochastic, video, (args.width, args.height))
-      if video:
+                     not args.stochastic, video, (args.width, args.height),
+                     args.trace if first else '')
+      if first and (args.video or args.trace):
         filmed = bool(played[0]['success'])
-        if args.strip:
-          from runners import video as video_lib  # pylint: disable=g-import-not-at-top
-          video_lib.write_strip(args.video, args.strip)
+      if video and args.strip:
+        from runners import video as video_lib  # pylint: disable=g-import-not-at-top
+        video_lib.write_strip(args.video, args.strip)
       log(f'model {index + 1}/{len(args.checkpoint)}, seed {seed}: '
           f'{args.episodes} episodes, success '
           f'{100 * np.mean([e["success"] for e in played[-args.episodes:]]):.1f}%')
@@ -481,9 +533,11 @@ def main(argv=None):
   if out['figures']:
     print('means: ' + ', '.join(f'{k} {v:.3g}'
                                 for k, v in out['figures'].items()))
+  recorded = 'succeeded' if out['filmed_success'] else 'failed'
   if args.video:
-    print(f'video: {args.video} (the filmed episode '
-          f'{"succeeded" if out["filmed_success"] else "failed"})')
+    print(f'video: {args.video} (the filmed episode {recorded})')
+  if args.trace:
+    print(f'trace: {args.trace} (the traced episode {recorded})')
   print(json.dumps({k: out[k] for k in ('success', 'success_se', 'return',
                                          'return_se', 'episodes')}))
   if args.json:

@@ -384,6 +384,47 @@ def test_the_stability_figures_are_logged_and_checkpointed(hrl_run):
   assert int(learner.state.update) == 2
 
 
+def test_the_trace_is_the_first_evaluated_episode_in_numbers(hrl_run,
+                                                            tmp_path):
+  args = evaluate.EvalArgs(checkpoint=[hrl_run], time_limit=1.0)
+  spec, config, models, _ = evaluate.load_model(hrl_run, args)
+  trace = tmp_path / 'deep' / 'e.csv'
+  played = evaluate.play(spec, config, models, 5, 3, 2, trace=str(trace))
+  assert played == evaluate.play(spec, config, models, 5, 3, 2)
+  with open(trace, newline='') as f:
+    rows = list(csv.DictReader(f))
+  # The first observation, then 1 s of 50 ms steps: one episode.
+  assert [round(float(r['time']), 3) for r in rows] == [
+      round(0.05 * i, 3) for i in range(21)]
+  assert float(rows[-1]['return']) == pytest.approx(played[0]['return'])
+  assert float(rows[0]['return']) == 0.0
+  assert float(rows[0]['reward/cylinder_target']) == 0.0
+  assert float(rows[-1]['reward/cylinder_target']) == pytest.approx(
+      played[0]['reward/cylinder_target'])
+  n = spec.n_agents
+  columns = list(rows[0])
+  # Transport tracks its cylinder and target zone after the Ants.
+  assert columns[1:3 * n + 7] == [f'{name}_{axis}' for name in (
+      [f'agent{i}' for i in range(n)] + ['point0', 'point1'])
+                                  for axis in 'xyz']
+  # The first row is the first copy's start, not the second's.
+  starts = []
+  for copy_seed in evaluate.copy_seeds(5, 2):
+    bare = []
+    env = spec.make(copy_seed, wrap_raw=lambda e: bare.append(e) or e)  # pylint: disable=cell-var-from-loop
+    env.reset()
+    starts.append(bare[0].task.tracked_positions(bare[0].physics))
+    env.close()
+  first = np.array([[float(rows[0][f'{name}_{axis}']) for axis in 'xyz']
+                    for name in [f'agent{i}' for i in range(n)]
+                    + ['point0', 'point1']])
+  np.testing.assert_allclose(first, starts[0])
+  assert not np.allclose(first, starts[1])
+  # The Ants moved during the episode.
+  last = np.array([float(rows[-1][f'agent0_{axis}']) for axis in 'xy'])
+  assert np.linalg.norm(last - first[0, :2]) > 0.01
+
+
 def test_the_first_transport_run_still_evaluates(capsys):
   """The shipped checkpoint of the first layout (format 1) loads."""
   best = os.path.join(os.path.dirname(__file__), '..', 'results',
