@@ -287,8 +287,11 @@ def dry_run(args: PaperArgs, plan=None) -> str:
     if state.problem:
       lines.append(f'  ! {state.problem}')
   lines.append(f'{len(cells)} cells, ~{total / 3600:.0f} h to go at '
-               f'{paper_plan.AGENT_STEPS_PER_SECOND:,.0f} Ant steps/s '
-               '(runners.paper_plan.AGENT_STEPS_PER_SECOND)')
+               f'{paper_plan.AGENT_STEPS_PER_SECOND:,.0f} Ant steps/s, '
+               + ', '.join(f'{agent} at {share:g} of it'
+                           for agent, share in
+                           paper_plan.VARIANT_SPEED.items())
+               + ' (runners.paper_plan)')
   return '\n'.join(lines)
 
 

@@ -74,6 +74,17 @@ AGENT_STEPS_PER_SECOND = 6_400.0
 (`hrl`, 2 actors, the 2-core AMD EPYC development machine: corridor/hrl/n4/s0
 averaged 1,640 beside other work; docs/paper.md); a cell with k Ants per
 copy is estimated at 6,400 / k env steps/s."""
+VARIANT_SPEED = {'flat': 0.45}
+"""A variant's throughput as a share of `AGENT_STEPS_PER_SECOND` (1 where
+absent). `flat` decides every control step (8 joint actions an Ant, no
+lower layer): an update covers 1,024 env steps instead of a commanded
+variant's 10,240, so per env step its learner does ten times the work and
+its actors pay the per-update costs ten times. Corridor with 4 Ants on the
+2-core AMD EPYC with nothing else running, `coop-train --task corridor
+--agent flat` (defaults, 52 updates after start-up): 894 env steps/s,
+against 1,950-2,100 for `hrl` in corridor/hrl/n4/s3's idle stretches the
+same morning (0.43-0.46). `no_memory` and `mappo` ran at or above `hrl`'s
+rate in short probes (corridor, 4 and 6 Ants)."""
 POPULATIONS = (2, 3, 4, 5)
 """The columns of Table 2 (ravine: crossers)."""
 
@@ -230,9 +241,11 @@ PLAN = paper_plan()
 def estimated_seconds(cell: Cell, steps: int, episodes: int = EPISODES
                       ) -> float:
   """Estimated wall time (s) of `steps` training steps of `cell` plus the
-  evaluations of its final checkpoint, at `AGENT_STEPS_PER_SECOND`."""
+  evaluations of its final checkpoint, at `AGENT_STEPS_PER_SECOND` times
+  the variant's `VARIANT_SPEED`."""
   steps_per_episode = EPISODE_SECONDS / CONTROL_TIMESTEP
   ant_steps = steps * cell.ants + sum(
       episodes * steps_per_episode * (cell.ants - cell.n_agents + n)
       for n in cell.populations)
-  return ant_steps / AGENT_STEPS_PER_SECOND
+  return ant_steps / (AGENT_STEPS_PER_SECOND
+                      * VARIANT_SPEED.get(cell.agent, 1.0))

@@ -120,6 +120,19 @@ def test_dry_run_prints_every_cell_with_its_status(tmp_path, capsys):
         paper.train_args(cell, args), progress=True)
 
 
+def test_a_flat_cell_is_estimated_at_its_own_rate():
+  by_path = {cell.path: cell for cell in paper_plan.PLAN}
+  hrl = by_path['corridor/hrl/n4/s0']
+  flat = by_path['corridor/flat/n4/s0']
+  assert (hrl.budget, hrl.ants) == (flat.budget, flat.ants)
+  training = lambda cell: paper_plan.estimated_seconds(  # pylint: disable=g-long-lambda
+      cell, hrl.budget, episodes=0)  # HRL cells evaluate more populations.
+  assert training(flat) == pytest.approx(
+      training(hrl) / paper_plan.VARIANT_SPEED['flat'])
+  assert training(by_path['corridor/no_memory/n4/s0']) == pytest.approx(
+      training(hrl))
+
+
 def _fake_run(logdir, train_args, env_steps):
   """A run directory whose one checkpoint (format 1) saved `train_args`."""
   os.makedirs(os.path.join(logdir, 'checkpoints', 'ckpt_00000003'))
