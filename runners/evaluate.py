@@ -27,7 +27,8 @@ species with another checkpoint's policy, e.g. to compose curriculum
 stages. `--video`
 films the first evaluated episode (first model, first seed, first copy) as
 it is played, headless, one frame per control step, with
-`coop_suite.camera.FramingCamera`. `--json` writes every
+`coop_suite.camera.FramingCamera`; `--trace` writes the same episode's
+positions and figures per control step to a CSV. `--json` writes every
 episode's figures in marl-eval's layout (`runners.marl_eval`).
 """
 import csv
@@ -103,8 +104,9 @@ class EvalArgs:
   (`Task.tracked_positions`: transport's cylinder and target zone, the
   corridor's slit exit, the ravine's stone), then the episode's figures so
   far (`Task.episode_metrics`: success, return, reward terms and the
-  task's progress, e.g. the ravine's `crossed` and `bridge_error`). Empty
-  for none."""
+  task's progress, e.g. the ravine's `crossed` and `bridge_error`; the
+  task's own figures: `flat`'s locomotion terms, which its wrapper adds to
+  the played return, are not in them). Empty for none."""
   strip: str = ''
   """With --video: also this PNG, the filmed episode's frames at 0, 1/4,
   1/2, 3/4 and its end side by side at half size (a still for docs)."""
@@ -357,13 +359,14 @@ class _Recording:
   empty), each state once, until its first episode ends."""
 
   def __init__(self, env, video, size, trace):
-    from coop_suite import camera  # pylint: disable=g-import-not-at-top
-    from runners import video as video_lib  # pylint: disable=g-import-not-at-top
     self._env, self._size = env, size
-    self._camera, self._render = camera.FramingCamera(), camera.render
-    self._writer = (video_lib.open_video(video,
-                                         round(1 / env.control_timestep()))
-                    if video else None)
+    self._writer = None
+    if video:
+      from coop_suite import camera  # pylint: disable=g-import-not-at-top
+      from runners import video as video_lib  # pylint: disable=g-import-not-at-top
+      self._camera, self._render = camera.FramingCamera(), camera.render
+      self._writer = video_lib.open_video(video,
+                                          round(1 / env.control_timestep()))
     self._trace = None
     if trace:
       os.makedirs(os.path.dirname(os.path.abspath(trace)), exist_ok=True)
@@ -381,9 +384,9 @@ class _Recording:
       self._writer.append_data(self._render(self._env, self._camera,
                                             *self._size))
     if self._trace:
-      self._write_row()
+      self._add_row()
 
-  def _write_row(self):
+  def _add_row(self):
     task, physics = self._env.task, self._env.physics
     points = np.asarray(task.tracked_positions(physics), dtype=float)
     row = {'time': round(float(physics.data.time), 6)}
@@ -418,12 +421,14 @@ class _Recording:
       self._writer.close()
     if self._trace:
       # Reward terms are summed from the first reward on: 0 before it.
-      names = list(dict.fromkeys(k for row in self._rows for k in row))
-      rows = csv.DictWriter(self._trace, fieldnames=names)
-      rows.writeheader()
+      # The columns in the order of the last row, which has them all.
+      names = list(dict.fromkeys(
+          k for row in reversed(self._rows) for k in row))
+      writer = csv.DictWriter(self._trace, fieldnames=names)
+      writer.writeheader()
       for row in self._rows:
-        rows.writerow({k: row.get(k, 0.0 if k.startswith('reward/') else '')
-                       for k in names})
+        writer.writerow({k: row.get(k, 0.0 if k.startswith('reward/')
+                                    else '') for k in names})
       self._trace.close()
 
   def close(self):
@@ -449,7 +454,7 @@ def evaluate(args: EvalArgs, log=None) -> dict:
   from runners import metrics as metrics_lib  # pylint: disable=g-import-not-at-top
   log = log or (lambda line: None)
   per_model, episodes, description = [], [], None
-  filmed = None
+  recorded = None
   for index, path in enumerate(args.checkpoint):
     spec, config, models, state = load_model(path, args)
     description = (f'{spec.task} with {spec.n_agents} agents, agent '
@@ -463,7 +468,7 @@ def evaluate(args: EvalArgs, log=None) -> dict:
                      not args.stochastic, video, (args.width, args.height),
                      args.trace if first else '')
       if first and (args.video or args.trace):
-        filmed = bool(played[0]['success'])
+        recorded = bool(played[0]['success'])
       if video and args.strip:
         from runners import video as video_lib  # pylint: disable=g-import-not-at-top
         video_lib.write_strip(args.video, args.strip)
@@ -489,7 +494,7 @@ def evaluate(args: EvalArgs, log=None) -> dict:
   out = {'description': description, 'episodes': len(episodes),
          'success': success, 'success_se': success_se, 'return': ret,
          'return_se': ret_se, 'figures': task_figures(per_model),
-         'models': per_model, 'filmed_success': filmed}
+         'models': per_model, 'recorded_success': recorded}
   if len(per_model) > 1:
     out['success_se_models'] = mean_and_error(
         [m['success'] for m in per_model])[1]
@@ -533,7 +538,7 @@ def main(argv=None):
   if out['figures']:
     print('means: ' + ', '.join(f'{k} {v:.3g}'
                                 for k, v in out['figures'].items()))
-  recorded = 'succeeded' if out['filmed_success'] else 'failed'
+  recorded = 'succeeded' if out['recorded_success'] else 'failed'
   if args.video:
     print(f'video: {args.video} (the filmed episode {recorded})')
   if args.trace:

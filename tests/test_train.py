@@ -423,6 +423,15 @@ def test_the_trace_is_the_first_evaluated_episode_in_numbers(hrl_run,
   # The Ants moved during the episode.
   last = np.array([float(rows[-1][f'agent0_{axis}']) for axis in 'xy'])
   assert np.linalg.norm(last - first[0, :2]) > 0.01
+  # Reward terms (absent before the first reward) keep the last row's
+  # order: after the return, before the task's progress.
+  assert (columns.index('return') < columns.index('reward/cylinder_target')
+          < columns.index('cylinder_target_distance'))
+  # coop-eval --trace alone says how the traced episode ended.
+  out = evaluate.evaluate(dataclasses.replace(
+      args, episodes=1, seeds=(5,), trace=str(tmp_path / 'alone.csv')))
+  assert out['recorded_success'] is False
+  assert (tmp_path / 'alone.csv').stat().st_size > 0
 
 
 def test_the_first_transport_run_still_evaluates(capsys):
