@@ -49,6 +49,14 @@ def test_flatten_key_order_and_shapes():
                              rtol=1e-6)
   stacked = {k: np.stack([v, v]) for k, v in observation.items()}
   np.testing.assert_array_equal(obs_lib.flatten(stacked, keys), [flat, flat])
+  # Parts of other types: each value as its own float32 cast gives it.
+  mixed = {'a': np.array([0.1, 1e-40, 3e38]), 'b': np.float32([0.1]),
+           'c': np.array([True]), 'd': [2, 3]}
+  np.testing.assert_array_equal(
+      obs_lib.flatten(mixed, ('a', 'b', 'c', 'd')),
+      np.concatenate([np.asarray(mixed[k], np.float32) for k in 'abcd']))
+  with pytest.raises(KeyError, match="no 'e'"):
+    obs_lib.flatten(mixed, ('a', 'e'))
   with pytest.raises(ValueError, match='command'):
     obs_lib.observation_keys({'proprio/a': 0})
 
