@@ -123,16 +123,18 @@ class FlatEnv:
 
   def __init__(self, env):
     from coop_suite.tasks import locomotion  # pylint: disable=g-import-not-at-top
+    from coop_suite.tasks import rewards  # pylint: disable=g-import-not-at-top
     self.env = env
     self._config = locomotion.LocomotionConfig()
-    self._sums = {}
+    self._rewards = rewards
+    self._sums = None  # [terms, n_agents] from the first reward on.
     self._actions = None  # Those of a step in its two phases.
 
   def __getattr__(self, name):  # task, physics, specs, control_timestep...
     return getattr(self.env, name)
 
   def reset(self):
-    self._sums = {}
+    self._sums = None
     return self.env.reset()
 
   def step(self, actions):
@@ -149,26 +151,29 @@ class FlatEnv:
     return self._with_terms(self.env.step_outcome(observe), actions)
 
   def _with_terms(self, timestep, actions):
-    from coop_suite.tasks import rewards  # pylint: disable=g-import-not-at-top
     if timestep.first() or self.env.physics_diverged:
       return timestep
     task = self.env.task
-    terms = rewards.locomotion_terms(
+    terms = self._rewards.locomotion_term_array(  # [terms, n_agents]
         task.features(self.env.physics, ('proprio',)),
         np.clip(np.asarray(actions, np.float64), -1.0, 1.0),
         task.joint_ranges, self._config)
-    total = np.zeros(self.env.n_agents)
-    for name, value in terms.items():
-      self._sums[name] = self._sums.get(name, 0.0) + value
-      total += value
-    reward = [np.float32(r + t) for r, t in zip(timestep.reward, total)]
-    return timestep._replace(reward=reward)
+    if self._sums is None:
+      self._sums = np.zeros_like(terms)
+    self._sums += terms
+    total = np.zeros(terms.shape[1])
+    for term in terms:  # In order, one after the other.
+      total += term
+    reward = (np.asarray(timestep.reward, np.float64)
+              + total).astype(np.float32)
+    return timestep._replace(reward=list(reward))
 
   def episode_metrics(self):
     metrics = self.env.episode_metrics()
-    for name, total in self._sums.items():
-      metrics[f'reward/{name}'] = float(np.mean(total))
-      metrics['return'] += float(np.mean(total))
+    if self._sums is not None:
+      for name, total in zip(self._rewards.LOCOMOTION_TERMS, self._sums):
+        metrics[f'reward/{name}'] = float(np.mean(total))
+        metrics['return'] += float(np.mean(total))
     return metrics
 
 

@@ -357,6 +357,80 @@ def test_locomotion_terms_match_each_ants_own_accessors():
   assert limits_seen > 0, "no joint reached its limit: test not exercised"
 
 
+def _numpy_locomotion_terms(proprio, actions, joint_ranges, config):
+  """The terms as numpy writes them: the compiled kernel's reference."""
+  actions = np.asarray(actions, dtype=np.float64)
+  upright = proprio["proprio/gravity"][:, 2]
+  low, high = joint_ranges[..., 0], joint_ranges[..., 1]
+  centre, half = (high + low) / 2, (high - low) / 2
+  at_limit = np.sum(np.abs(proprio["proprio/joints_pos"] - centre)
+                    > 0.99 * half, axis=-1)
+  return {
+      "alive": np.full(len(actions), config.alive_bonus),
+      "up": np.where(upright > 0.93, config.up_bonus, 0.0),
+      "action_cost": -config.action_cost * np.sum(actions**2, axis=-1),
+      "energy_cost": -config.energy_cost * np.sum(np.abs(
+          actions * 0.2 * proprio["proprio/joints_vel"]), axis=-1),
+      "joint_limit_cost": -config.joint_limit_cost * at_limit,
+  }
+
+
+def test_compiled_locomotion_terms_are_numpys_bit_for_bit():
+  config = locomotion.LocomotionConfig()
+  rng = np.random.default_rng(0)
+  env = coop_suite.load("transport", 3, seed=0)
+  env.reset()
+  states = []
+  for _ in range(30):  # Real states, joints at their limits included.
+    actions = rng.choice([-1.0, 0.3, 1.0], (3, 8))
+    env.step(actions)
+    states.append((env.task.features(env.physics, ("proprio",)), actions,
+                   env.task.joint_ranges))
+  for n in (1, 2, 5):  # And wide random ones, 1 to 5 agents.
+    ranges = np.sort(rng.uniform(-1.5, 1.5, (n, 8, 2)), axis=-1)
+    states.append(({"proprio/gravity": rng.uniform(-1, 1, (n, 3)),
+                    "proprio/joints_pos": rng.uniform(-1.6, 1.6, (n, 8)),
+                    "proprio/joints_vel": rng.standard_normal((n, 8))
+                                          * np.exp(rng.uniform(-5, 5, (n, 8)))},
+                   rng.uniform(-1, 1, (n, 8)), ranges))
+  for proprio, actions, ranges in states:
+    ours = rewards.locomotion_terms(proprio, actions, ranges, config)
+    theirs = _numpy_locomotion_terms(proprio, actions, ranges, config)
+    assert list(ours) == list(rewards.LOCOMOTION_TERMS) == list(theirs)
+    for name in ours:
+      np.testing.assert_array_equal(ours[name], theirs[name], err_msg=name)
+
+
+def test_flat_rewards_add_the_terms_in_order_to_the_tasks():
+  """'flat' (`FlatEnv`): each agent's reward is float32(the task's reward +
+  the terms summed in order), its sums the terms' over the episode."""
+  from runners import envs  # pylint: disable=g-import-not-at-top
+  config = locomotion.LocomotionConfig()
+  flat = envs.FlatEnv(coop_suite.load("corridor", 3, seed=4))
+  bare = coop_suite.load("corridor", 3, seed=4)
+  flat.reset()
+  bare.reset()
+  rng = np.random.default_rng(1)
+  sums = {}
+  for _ in range(12):
+    actions = rng.uniform(-1.3, 1.3, (3, 8))  # Clipped to [-1, 1].
+    ours, theirs = flat.step(actions), bare.step(actions)
+    terms = _numpy_locomotion_terms(
+        bare.task.features(bare.physics, ("proprio",)),
+        np.clip(actions, -1, 1), bare.task.joint_ranges, config)
+    total = np.zeros(3)
+    for name, value in terms.items():
+      total += value
+      sums[name] = sums.get(name, 0.0) + value
+    assert ours.reward == [np.float32(r + t)
+                           for r, t in zip(theirs.reward, total)]
+  metrics, task_metrics = flat.episode_metrics(), bare.episode_metrics()
+  assert metrics["return"] == pytest.approx(
+      task_metrics["return"] + sum(np.mean(v) for v in sums.values()))
+  for name, value in sums.items():
+    assert metrics[f"reward/{name}"] == float(np.mean(value))
+
+
 def test_walk_velocity_tracking_figures_cover_only_the_steps_they_apply_to():
   env = coop_suite.load("walk_velocity", seed=3)
   env.reset()

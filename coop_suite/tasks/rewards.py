@@ -62,6 +62,11 @@ def velocity_tracking(scale, velocity_xy, command_xy, min_speed=0.05):
   return scale * np.where(speed >= min_speed, tracking, still)
 
 
+LOCOMOTION_TERMS = ("alive", "up", "action_cost", "energy_cost",
+                    "joint_limit_cost")
+"""The names of `locomotion_term_array`'s rows, in order."""
+
+
 def locomotion_terms(proprio, actions, joint_ranges, config):
   """The lower layer's shared terms (alive, up, action/energy/limit costs).
 
@@ -83,19 +88,70 @@ def locomotion_terms(proprio, actions, joint_ranges, config):
   Returns:
     dict of term name -> [n_agents] array.
   """
-  actions = np.asarray(actions, dtype=np.float64)
-  upright = proprio["proprio/gravity"][:, 2]
-  joint_vel = proprio["proprio/joints_vel"]
-  low, high = joint_ranges[..., 0], joint_ranges[..., 1]
-  centre, half = (high + low) / 2, (high - low) / 2
-  at_limit = np.sum(np.abs(proprio["proprio/joints_pos"] - centre)
-                    > 0.99 * half, axis=-1)
-  n = len(actions)
-  return {
-      "alive": np.full(n, config.alive_bonus),
-      "up": np.where(upright > 0.93, config.up_bonus, 0.0),
-      "action_cost": -config.action_cost * np.sum(actions**2, axis=-1),
-      "energy_cost": -config.energy_cost * np.sum(
-          np.abs(actions * 0.2 * joint_vel), axis=-1),
-      "joint_limit_cost": -config.joint_limit_cost * at_limit,
-  }
+  return dict(zip(LOCOMOTION_TERMS, locomotion_term_array(
+      proprio, actions, joint_ranges, config)))
+
+
+def locomotion_term_array(proprio, actions, joint_ranges, config):
+  """`locomotion_terms` as one float64 array [5, n_agents], its rows in
+  `LOCOMOTION_TERMS` order (for code that adds them up every step)."""
+  return _locomotion_terms(
+      np.asarray(proprio["proprio/gravity"], np.float64),
+      np.asarray(proprio["proprio/joints_pos"], np.float64),
+      np.asarray(proprio["proprio/joints_vel"], np.float64),
+      np.asarray(actions, np.float64),
+      np.asarray(joint_ranges, np.float64), float(config.alive_bonus),
+      float(config.up_bonus), float(config.action_cost),
+      float(config.energy_cost), float(config.joint_limit_cost))
+
+
+@numba.njit(cache=True)
+def _locomotion_terms(gravity, joints_pos, joints_vel, actions, joint_ranges,
+                      alive_bonus, up_bonus, action_cost, energy_cost,
+                      joint_limit_cost):
+  """The terms, each joint sum added in numpy's order (`_row_sum`), so
+  the values are those of the same formulas in numpy, bit for bit."""
+  n, joints = actions.shape
+  out = np.empty((5, n))
+  squares = np.empty(joints)
+  energies = np.empty(joints)
+  for i in range(n):
+    at_limit = 0
+    for j in range(joints):
+      a = actions[i, j]
+      squares[j] = a * a
+      energies[j] = abs(a * 0.2 * joints_vel[i, j])
+      low, high = joint_ranges[i, j, 0], joint_ranges[i, j, 1]
+      if abs(joints_pos[i, j] - (high + low) / 2) > 0.99 * ((high - low) / 2):
+        at_limit += 1
+    out[0, i] = alive_bonus
+    out[1, i] = up_bonus if gravity[i, 2] > 0.93 else 0.0
+    out[2, i] = -action_cost * _row_sum(squares)
+    out[3, i] = -energy_cost * _row_sum(energies)
+    out[4, i] = -joint_limit_cost * at_limit
+  return out
+
+
+@numba.njit(cache=True)
+def _row_sum(values):
+  """`np.sum` of a contiguous float64 vector as numpy adds it (pairwise:
+  eight running sums combined as a tree, then the remainder; in order
+  below eight), for up to 128 values."""
+  n = values.shape[0]
+  if n < 8:
+    total = 0.0
+    for i in range(n):
+      total += values[i]
+    return total
+  partial = values[:8].copy()
+  i = 8
+  while i < n - n % 8:
+    for k in range(8):
+      partial[k] += values[i + k]
+    i += 8
+  total = (((partial[0] + partial[1]) + (partial[2] + partial[3]))
+           + ((partial[4] + partial[5]) + (partial[6] + partial[7])))
+  while i < n:
+    total += values[i]
+    i += 1
+  return total
