@@ -367,10 +367,7 @@ class _Recording:
       self._camera, self._render = camera.FramingCamera(), camera.render
       self._writer = video_lib.open_video(video,
                                           round(1 / env.control_timestep()))
-    self._trace = None
-    if trace:
-      os.makedirs(os.path.dirname(os.path.abspath(trace)), exist_ok=True)
-      self._trace = open(trace, 'w', newline='')  # pylint: disable=consider-using-with
+    self._trace = trace
     self._rows = []  # The trace's; written when the episode ends.
     self.done = False
 
@@ -424,12 +421,14 @@ class _Recording:
       # The columns in the order of the last row, which has them all.
       names = list(dict.fromkeys(
           k for row in reversed(self._rows) for k in row))
-      writer = csv.DictWriter(self._trace, fieldnames=names)
-      writer.writeheader()
-      for row in self._rows:
-        writer.writerow({k: row.get(k, 0.0 if k.startswith('reward/')
-                                    else '') for k in names})
-      self._trace.close()
+      os.makedirs(os.path.dirname(os.path.abspath(self._trace)),
+                  exist_ok=True)
+      with open(self._trace, 'w', newline='') as f:
+        writer = csv.DictWriter(f, fieldnames=names)
+        writer.writeheader()
+        for row in self._rows:
+          writer.writerow({k: row.get(k, 0.0 if k.startswith('reward/')
+                                      else '') for k in names})
 
   def close(self):
     if not self.done:
