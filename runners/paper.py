@@ -15,20 +15,23 @@ from it (`coop-train --resume`), one whose training has finished is only
 evaluated. Evaluation is the paper's protocol: the final checkpoint,
 `--episodes` (100) episodes from seed `--eval-seed` (1000), which training
 never uses. Training and evaluation run in this process
-(`learner_loop.train`, `evaluate.evaluate`). Ctrl-C / SIGTERM stop the
-running cell after a checkpoint (exit status 128 + the signal's number); run
-the same command again to continue. `coop-paper --stash` copies unfinished
-runs into `--partial` (results/paper_partial) to be committed at the end of
-a session; the next session's `coop-paper` resumes from them. `--hours H`
-does both by itself when H hours are up (a session's or a cluster job's
-time limit): the cell stops with a checkpoint, is stashed, and coop-paper
-exits with status 75 (`EXIT_OUT_OF_TIME`). See docs/paper.md.
+(`learner_loop.train`, `evaluate.evaluate`); with `--concurrent N`, N
+cells at a time, each in a process of its own (`run_concurrently`).
+Ctrl-C / SIGTERM stop the running cell after a checkpoint (exit status 128
++ the signal's number); run the same command again to continue.
+`coop-paper --stash` copies unfinished runs into `--partial`
+(results/paper_partial) to be committed at the end of a session; the
+next session's `coop-paper` resumes from them. `--hours H` does both by
+itself when H hours are up (a session's or a cluster job's time limit):
+the cell stops with a checkpoint, is stashed, and coop-paper exits with
+status 75 (`EXIT_OUT_OF_TIME`). See docs/paper.md.
 """
 import dataclasses
 import os
 import shutil
 import signal
 import sys
+import time
 from typing import Callable, Optional
 
 from agents import fields
@@ -97,6 +100,16 @@ class PaperArgs:
   """Environment copies stepped together while evaluating."""
   progress: bool = True
   """Progress bar while training."""
+  concurrent: int = fields.field(1, fields.COUNT)
+  """Cells trained at the same time, each in a process of its own (a cell
+  waits for the stage cells it starts from). A training leaves cores idle
+  while its learner updates (on 2 cores a fifth of its wall time), which
+  another cell's training fills: on the 2-core machine `--concurrent 2
+  --actors 0` trains more of the plan per hour than one cell at a time
+  with 2 actors (docs/performance.md, `benchmarks/concurrent_runs.py`),
+  each cell taking nearly twice as long. With --actors above 0 every
+  process would start a Ray of its own, so that needs --ray-address (or
+  RAY_ADDRESS: one cluster for all)."""
   hours: float = fields.field(0.0, fields.NON_NEGATIVE)
   """Wall-clock hours for this command, 0 for no limit (a session's or a
   cluster job's time, less a margin). When they are up, the cell being
@@ -443,9 +456,10 @@ def run_cell(cell: paper_plan.Cell, args: PaperArgs,
 
 def run_plan(args: PaperArgs, plan=None,
              log: Callable[[str], None] = print) -> Optional[str]:
-  """Runs every selected cell that is not done, in plan order; returns what
-  stopped it early (`run_cell`), else None. Out of `--hours`, the cell it
-  stopped is stashed and no other starts."""
+  """Runs every selected cell that is not done, in plan order (with
+  `--concurrent` N, N at a time: `run_concurrently`); returns what stopped
+  it early (`run_cell`), else None. Out of `--hours`, the cell it stopped
+  is stashed and no other starts."""
   deadline = run_dir.clock() + args.hours * 3600 if args.hours else None
   default = PaperArgs()
   if args.budget and (args.results == default.results
@@ -462,6 +476,22 @@ def run_plan(args: PaperArgs, plan=None,
     return None  # Nothing to train or evaluate: no Ray either.
   for cell in cells:  # Refuses --actors that split a cell's copies unevenly.
     train_args(cell, args)
+  if args.concurrent > 1:
+    if (args.actors and not args.ray_address
+        and not os.environ.get('RAY_ADDRESS')):
+      raise ValueError(
+          f'--concurrent {args.concurrent} trains each cell in a process of '
+          f'its own, and with --actors {args.actors} each would start a Ray '
+          'of its own: give --actors 0 (each process steps its cell\'s '
+          'copies itself) or --ray-address of one cluster.')
+    return run_concurrently(args, cells, log, deadline)
+  return _run_in_turn(args, cells, log, deadline)
+
+
+def _run_in_turn(args: PaperArgs, cells: list[paper_plan.Cell],
+                 log: Callable[[str], None],
+                 deadline: Optional[float]) -> Optional[str]:
+  """`run_plan`'s cells one after the other in this process."""
   # Ray before anything reads a checkpoint: orbax starts JAX, and Ray's
   # processes are not to be started from a process where JAX runs threads.
   from runners import actor_pool  # pylint: disable=g-import-not-at-top
@@ -487,6 +517,171 @@ def run_plan(args: PaperArgs, plan=None,
     if owns_ray:
       import ray  # pylint: disable=g-import-not-at-top
       ray.shutdown()
+
+
+class CellFailed(Exception):
+  """A cell's process under `--concurrent` ended with an error (its own
+  message, if it had one, is above it on the standard error)."""
+
+
+POLL_SECONDS = 1.0
+"""How often `run_concurrently` looks at its cells' processes."""
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+def exit_status(stopped: Optional[str]) -> int:
+  """coop-paper's exit status when `stopped` (what `run_plan` returns)
+  stopped it: 0, `EXIT_OUT_OF_TIME`, or 128 + the signal's number."""
+  if stopped is None:
+    return 0
+  if stopped == run_dir.DEADLINE:
+    return EXIT_OUT_OF_TIME
+  return 128 + signal.Signals[stopped].value
+
+
+def _ended(status: int, signalled: Optional[str]) -> Optional[str]:
+  """How a cell's process ended, from its exit status: None (done), what
+  stopped it (`exit_status`'s inverse), or '' for an error. After a signal
+  was passed on (`signalled`), dying by it or by its KeyboardInterrupt (a
+  second one, or one before training started) is that signal's stop."""
+  if status == 0:
+    return None
+  if status == EXIT_OUT_OF_TIME:
+    return run_dir.DEADLINE
+  stops = {128 + s: s.name for s in STOP_SIGNALS}
+  if status in stops:
+    return stops[status]
+  if signalled and status in (1, *(-s for s in STOP_SIGNALS)):
+    return signalled
+  return ''
+
+
+def _failure(cell: paper_plan.Cell, status: int) -> str:
+  if status < 0:
+    return f'{cell.path} (killed by {signal.Signals(-status).name})'
+  return f'{cell.path} (exit status {status})'
+
+
+def _cell_process(cell: paper_plan.Cell, args: PaperArgs,
+                  deadline: Optional[float]):
+  """A cell's own process under `--concurrent`: the cell as `coop-paper
+  --only <cell>` trains it (stashed when out of time), ending with the
+  same exit status; a signal outside its training (starting, evaluating)
+  ends it at once with 128 + the signal's number."""
+  os.setsid()  # Its signals come from coop-paper, once each.
+  try:  # It stops (SIGTERM, with a checkpoint) if coop-paper dies.
+    import ctypes  # pylint: disable=g-import-not-at-top
+    ctypes.CDLL(None).prctl(1, int(signal.SIGTERM))  # PR_SET_PDEATHSIG
+  except (OSError, AttributeError):  # Not Linux: coop-paper's end only.
+    pass
+  # Several JAX processes share a GPU only if none takes most of it.
+  os.environ.setdefault('XLA_PYTHON_CLIENT_PREALLOCATE', 'false')
+  received = []
+
+  def interrupt(signum, frame):
+    received.append(signum)
+    signal.default_int_handler(signum, frame)
+  for signum in STOP_SIGNALS:  # Training's `GracefulStop` overrides these.
+    signal.signal(signum, interrupt)
+  try:
+    stopped = _run_in_turn(args, [cell],
+                           lambda line: print(line, flush=True), deadline)
+  except cli.user_errors() as error:
+    cli.fail('coop-paper', error)
+  except KeyboardInterrupt:
+    sys.exit(128 + (received[-1] if received else signal.SIGINT))
+  sys.exit(exit_status(stopped))
+
+
+def start_cell_process(cell: paper_plan.Cell, args: PaperArgs,
+                       deadline: Optional[float]):
+  """Starts `_cell_process` in a fresh interpreter (spawned: no JAX or Ray
+  state of this one)."""
+  import multiprocessing  # pylint: disable=g-import-not-at-top
+  process = multiprocessing.get_context('spawn').Process(
+      target=_cell_process, args=(cell, args, deadline), name=cell.name)
+  process.start()
+  return process
+
+
+def _startable(waiting: list[paper_plan.Cell], running,
+               args: PaperArgs) -> list[paper_plan.Cell]:
+  """The waiting cells, in order, that start from no stage cell still
+  waiting or running."""
+  pending = {results_directory(c, args) for c in [*waiting, *running]}
+  return [cell for cell in waiting if not any(
+      folder in pending for _, folder in stage_directories(cell, args))]
+
+
+def run_concurrently(args: PaperArgs, cells: list[paper_plan.Cell],
+                     log: Callable[[str], None], deadline: Optional[float],
+                     start=start_cell_process) -> Optional[str]:
+  """Runs `cells` `--concurrent` at a time, each in a process of its own
+  (`start(cell, args, deadline)`: a started process with `pid` and
+  `exitcode`), taking them in order as processes end; a cell waits while a
+  stage cell it starts from waits or runs. Each signal (SIGINT, SIGTERM) is
+  passed on to the running cells: the first stops each after its update
+  with a checkpoint (a cell starting or being evaluated stops at once), a
+  second stops them at once. Out of --hours, the running cells stop and
+  stash themselves and no other starts. Returns what stopped it early, as
+  `run_plan`; once a cell's process ends with an error no other starts,
+  and `CellFailed` is raised when the running ones have ended. The cells'
+  processes get SIGTERM if this one ends otherwise (an error, or killed)."""
+  own = dataclasses.replace(args, concurrent=1, progress=False)
+  waiting, running, told = list(cells), {}, set()
+  stopped, signalled, failed = None, None, []
+
+  def forward(name):
+    for process in running.values():
+      if process.exitcode is None:
+        os.kill(process.pid, signal.Signals[name])
+
+  with run_dir.GracefulStop() as stop:
+    try:
+      while waiting or running:
+        if stop.requested and not signalled:
+          stopped = signalled = stop.reason
+          forward(signalled)
+        if (waiting and not stopped and not failed and deadline
+            and run_dir.clock() >= deadline):
+          log(f'Out of time (--hours {args.hours:g}) before '
+              f'{", ".join(cell.path for cell in waiting)}.')
+          stopped = run_dir.DEADLINE
+        if stopped or failed:
+          waiting = []
+        startable = _startable(waiting, running, args)
+        for cell in startable[:args.concurrent - len(running)]:
+          waiting.remove(cell)
+          log(f'{cell.path}: starts in a process of its own')
+          running[cell] = start(cell, own, deadline)
+        for cell in set(waiting) - set(startable) - told:
+          told.add(cell)
+          log(f'{cell.path}: waits for its stage cells')
+        time.sleep(POLL_SECONDS)
+        for cell, process in list(running.items()):
+          if process.exitcode is None:
+            continue
+          del running[cell]
+          ended = _ended(process.exitcode, signalled)
+          if ended == '':
+            failed.append(_failure(cell, process.exitcode))
+            log(f'{failed[-1]}: failed; no other cell starts')
+          elif ended:
+            stopped = stopped or ended
+    except KeyboardInterrupt:  # A second signal: at once, everywhere.
+      name = signalled or stop.reason or 'SIGINT'
+      if not signalled:  # Both came before a look: pass on both.
+        forward(name)
+        time.sleep(0.1)
+      forward(name)
+      raise
+    except BaseException:
+      forward('SIGTERM')  # Each stops after its update.
+      raise
+  if failed:
+    raise CellFailed(f'{", ".join(failed)} failed (its error, if any, is '
+                     'above).')
+  return stopped
 
 
 def _command(args: PaperArgs) -> Optional[str]:
@@ -516,8 +711,12 @@ def _command(args: PaperArgs) -> Optional[str]:
 
 
 def main(argv=None):
-  args, stopped = cli.run(PaperArgs, _command, argv, 'coop-paper',
-                          __doc__.splitlines()[0])
+  try:
+    args, stopped = cli.run(PaperArgs, _command, argv, 'coop-paper',
+                            __doc__.splitlines()[0])
+  except CellFailed as error:
+    print(f'coop-paper: error: {error}', file=sys.stderr, flush=True)
+    sys.exit(1)
   if args.report or args.dry_run or args.stash:
     return
   if stopped == run_dir.DEADLINE:
@@ -527,7 +726,7 @@ def main(argv=None):
   if stopped:
     print(f'Stopped by {stopped}; run the same coop-paper command again to '
           'continue.', flush=True)
-    sys.exit(128 + signal.Signals[stopped].value)
+    sys.exit(exit_status(stopped))
   print('Every selected cell is done; coop-paper --report shows the tables.')
 
 

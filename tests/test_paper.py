@@ -5,6 +5,9 @@ import json
 import os
 import shutil
 import signal
+import subprocess
+import sys
+import threading
 
 import imageio
 import pytest
@@ -417,6 +420,161 @@ def test_the_plan_skips_done_cells_and_resumes_a_partial_one(
   monkeypatch.setattr(actor_pool, 'init_ray',
                       lambda *a, **k: pytest.fail('Ray started'))
   paper.run_plan(dataclasses.replace(args, actors=2), plan, log=pytest.fail)
+
+
+def _plan_cells(*paths):
+  by_path = {cell.path: cell for cell in paper_plan.PLAN}
+  return [by_path[path] for path in paths]
+
+
+class _FakeCellProcess:
+  """A cell's process as `paper.run_concurrently` sees it: a child that
+  sleeps `seconds` and exits with `status` (143 on SIGTERM)."""
+
+  def __init__(self, seconds, status=0):
+    self._child = subprocess.Popen([sys.executable, '-c', (
+        'import signal, sys, time\n'
+        'signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))\n'
+        'print("ready", flush=True)\n'
+        f'time.sleep({seconds})\nsys.exit({status})')],
+                                   stdout=subprocess.PIPE, text=True)
+    assert self._child.stdout.readline() == 'ready\n'  # Its handler is in.
+    self.pid = self._child.pid
+
+  @property
+  def exitcode(self):
+    return self._child.poll()
+
+
+def test_concurrent_cells_fill_their_slots_and_wait_for_their_stages(
+    tmp_path, monkeypatch):
+  monkeypatch.setattr(paper, 'POLL_SECONDS', 0.05)
+  pushers, crossers, joint, corridor = cells = _plan_cells(
+      'ravine/hrl/pushers/n2/s1', 'ravine/hrl/crossers/n2/s1',
+      'ravine/hrl/n2/s1', 'corridor/hrl/n4/s1')
+  seconds = {pushers: 0.3, crossers: 1.0, joint: 0.1, corridor: 0.2}
+  args = _args(tmp_path, concurrent=2)
+  started, lines = {}, []
+
+  def start(cell, own, deadline):
+    running = [c for c, p in started.items() if p.exitcode is None]
+    assert len(running) < 2  # Never more than --concurrent at once.
+    if cell == joint:  # Only once both its stages have ended.
+      assert started[pushers].exitcode == 0 == started[crossers].exitcode
+    # Each process trains its one cell as coop-paper would, no bars.
+    assert (own.concurrent, own.progress, own.results, deadline) == (
+        1, False, args.results, None)
+    started[cell] = _FakeCellProcess(seconds[cell])
+    return started[cell]
+
+  assert paper.run_concurrently(args, cells, lines.append, None,
+                                start=start) is None
+  # The corridor took the slot the pushers left, as the joint cell waited.
+  assert list(started) == [pushers, crossers, corridor, joint]
+  assert all(p.exitcode == 0 for p in started.values())
+  starts = [f'{c.path}: starts in a process of its own' for c in started]
+  assert lines == [*starts[:2], f'{joint.path}: waits for its stage cells',
+                   *starts[2:]]
+
+
+def test_concurrent_cells_stop_together(tmp_path, monkeypatch):
+  monkeypatch.setattr(paper, 'POLL_SECONDS', 0.05)
+  first, second, third = cells = _plan_cells(
+      'corridor/hrl/n4/s1', 'corridor/hrl/n4/s2', 'corridor/hrl/n4/s3')
+  args = _args(tmp_path, concurrent=2, hours=1.0)
+  lines = []
+
+  # Out of --hours: the running cell's process stops and stashes itself
+  # (exit status 75) and no other starts.
+  clock = {'now': 0.0}
+  monkeypatch.setattr(run_dir, 'clock', lambda: clock['now'])
+
+  def start(cell, own, deadline):
+    assert deadline == 3600.0
+    clock['now'] = 4000.0
+    return _FakeCellProcess(0.2, paper.EXIT_OUT_OF_TIME)
+  assert paper.run_concurrently(args, cells, lines.append, 3600.0,
+                                start=start) == run_dir.DEADLINE
+  assert lines == [f'{first.path}: starts in a process of its own',
+                   f'{second.path}: starts in a process of its own',
+                   f'Out of time (--hours 1) before {third.path}.']
+  monkeypatch.undo()
+  monkeypatch.setattr(paper, 'POLL_SECONDS', 0.05)
+
+  # A signal goes on to every running cell (each stops after its update:
+  # here exit status 143), and no other starts.
+  started = []
+
+  def start_then_signal(cell, own, deadline):
+    started.append(_FakeCellProcess(30))
+    if len(started) == 2:
+      threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGTERM)).start()
+    return started[-1]
+  assert paper.run_concurrently(args, cells, lambda line: None, None,
+                                start=start_then_signal) == 'SIGTERM'
+  assert [p.exitcode for p in started] == [143, 143]
+
+  # A cell that fails: the other one runs to its end, none starts after,
+  # and the failure is raised.
+  started = []
+
+  def start_failing(cell, own, deadline):
+    started.append(_FakeCellProcess(0.05 if cell == first else 0.5,
+                                    1 if cell == first else 0))
+    return started[-1]
+  lines = []
+  with pytest.raises(paper.CellFailed,
+                     match=f'^{first.path} \\(exit status 1\\) failed'):
+    paper.run_concurrently(args, cells, lines.append, None,
+                           start=start_failing)
+  assert [p.exitcode for p in started] == [1, 0]
+  assert lines[-1] == (f'{first.path} (exit status 1): failed; no other '
+                       'cell starts')
+  # How a cell's process ended, from its exit status: a stop is one only
+  # for the signals passed on; after one, dying by it is its stop too.
+  for stopped in (None, run_dir.DEADLINE, 'SIGINT', 'SIGTERM'):
+    assert paper._ended(paper.exit_status(stopped), None) == stopped  # pylint: disable=protected-access
+  for status in (1, 2, -9, -15, 128 + signal.SIGKILL):
+    assert paper._ended(status, None) == ''  # pylint: disable=protected-access
+  for status in (1, -2, -15):
+    assert paper._ended(status, 'SIGTERM') == 'SIGTERM'  # pylint: disable=protected-access
+  assert paper._ended(2, 'SIGTERM') == ''  # pylint: disable=protected-access
+
+
+def test_concurrent_cells_need_one_ray_or_none(tmp_path, monkeypatch):
+  """Each process would start a Ray of its own: refused before anything
+  starts, unless they all join one cluster."""
+  monkeypatch.delenv('RAY_ADDRESS', raising=False)
+  monkeypatch.setattr(paper, 'run_concurrently', lambda *a: 'ran')
+  with pytest.raises(ValueError, match='--concurrent 2 .* --actors 0'):
+    paper.run_plan(_args(tmp_path, concurrent=2, actors=2), log=pytest.fail)
+  for overrides in ({'actors': 0}, {'actors': 2, 'ray_address': 'h:6379'}):
+    assert paper.run_plan(_args(tmp_path, concurrent=2, **overrides),
+                          log=pytest.fail) == 'ran'
+  monkeypatch.setenv('RAY_ADDRESS', 'h:6379')
+  assert paper.run_plan(_args(tmp_path, concurrent=2, actors=2),
+                        log=pytest.fail) == 'ran'
+
+
+def test_a_concurrent_cell_trains_and_publishes_in_its_own_process(
+    controller, tiny_run, tmp_path, capfd, monkeypatch):  # pylint: disable=redefined-outer-name
+  import jax  # pylint: disable=g-import-not-at-top
+  for name in ('jax_compilation_cache_dir',  # The suite's (conftest.py).
+               'jax_persistent_cache_min_compile_time_secs',
+               'jax_persistent_cache_min_entry_size_bytes'):
+    monkeypatch.setenv(name.upper(), str(getattr(jax.config, name)))
+  partial, done = plan = _tiny_plan(controller)
+  args = _args(tmp_path, concurrent=2)
+  shutil.copytree(tiny_run, paper.run_directory(partial, args))
+  _commit(done, args, {2: [1, 0]})
+  assert paper.run_plan(args, plan, log=print) is None
+  out = capfd.readouterr().out
+  assert f'{partial.path}: starts in a process of its own' in out
+  assert f'{done.path}: starts' not in out  # Done: skipped.
+  assert f'{partial.path}: done, results in' in out  # Said by its process.
+  assert paper.status(partial, args).state == 'done'
+  assert [int(r['update']) for r in _rows(os.path.join(
+      paper.results_directory(partial, args), 'metrics.csv'))] == [1, 2]
 
 
 def test_report_rebuilds_the_tables_from_committed_results(tmp_path, capsys,
