@@ -539,6 +539,7 @@ def test_concurrent_cells_stop_together(tmp_path, monkeypatch):
   for status in (1, -2, -15):
     assert paper._ended(status, 'SIGTERM') == 'SIGTERM'  # pylint: disable=protected-access
   assert paper._ended(2, 'SIGTERM') == ''  # pylint: disable=protected-access
+  assert paper._failure(first, -9) == f'{first.path} (killed by SIGKILL)'  # pylint: disable=protected-access
 
 
 def test_concurrent_cells_need_one_ray_or_none(tmp_path, monkeypatch):
@@ -554,6 +555,21 @@ def test_concurrent_cells_need_one_ray_or_none(tmp_path, monkeypatch):
   monkeypatch.setenv('RAY_ADDRESS', 'h:6379')
   assert paper.run_plan(_args(tmp_path, concurrent=2, actors=2),
                         log=pytest.fail) == 'ran'
+
+
+def test_a_failed_concurrent_cell_is_one_line_and_exit_status_1(
+    tmp_path, monkeypatch, capsys):
+  def failing(*_):
+    raise paper.CellFailed('corridor/hrl/n4/s1 (killed by SIGKILL) failed '
+                           '(its error, if any, is above).')
+  monkeypatch.setattr(paper, 'run_concurrently', failing)
+  with pytest.raises(SystemExit) as exit_info:
+    paper.main([f'--results={tmp_path}/r', f'--runs={tmp_path}/u',
+                f'--partial={tmp_path}/p', '--actors=0', '--concurrent=2'])
+  assert exit_info.value.code == 1
+  assert capsys.readouterr().err == (
+      'coop-paper: error: corridor/hrl/n4/s1 (killed by SIGKILL) failed '
+      '(its error, if any, is above).\n')
 
 
 def test_a_concurrent_cell_trains_and_publishes_in_its_own_process(
