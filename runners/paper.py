@@ -654,7 +654,8 @@ def run_concurrently(args: PaperArgs, cells: list[paper_plan.Cell],
           waiting.remove(cell)
           log(f'{cell.path}: starts in a process of its own')
           running[cell] = start(cell, own, deadline)
-        for cell in set(waiting) - set(startable) - told:
+        for cell in [c for c in waiting
+                     if c not in startable and c not in told]:
           told.add(cell)
           log(f'{cell.path}: waits for its stage cells')
         time.sleep(POLL_SECONDS)
