@@ -106,8 +106,8 @@ class PaperArgs:
   while its learner updates (on 2 cores a fifth of its wall time), which
   another cell's training fills: on the 2-core machine `--concurrent 2
   --actors 0` trains more of the plan per hour than one cell at a time
-  with 2 actors (docs/performance.md, `benchmarks/concurrent_runs.py`),
-  each cell taking nearly twice as long. With --actors above 0 every
+  with 2 actors (~25%: docs/performance.md, `benchmarks/concurrent_runs.py`),
+  each cell taking ~1.6x as long. With --actors above 0 every
   process would start a Ray of its own, so that needs --ray-address (or
   RAY_ADDRESS: one cluster for all)."""
   hours: float = fields.field(0.0, fields.NON_NEGATIVE)
