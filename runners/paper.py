@@ -650,14 +650,19 @@ def run_concurrently(args: PaperArgs, cells: list[paper_plan.Cell],
         if stopped or failed:
           waiting = []
         startable = _startable(waiting, running, args)
-        for cell in startable[:args.concurrent - len(running)]:
+        free = args.concurrent - len(running)
+        chosen = startable[:free]
+        # Named once, when a free process passes it over.
+        passed = (waiting[:waiting.index(chosen[-1])] if chosen
+                  else waiting if free > 0 else [])
+        for cell in passed:
+          if cell not in startable and cell not in told:
+            told.add(cell)
+            log(f'{cell.path}: waits for its stage cells')
+        for cell in chosen:
           waiting.remove(cell)
           log(f'{cell.path}: starts in a process of its own')
           running[cell] = start(cell, own, deadline)
-        for cell in [c for c in waiting
-                     if c not in startable and c not in told]:
-          told.add(cell)
-          log(f'{cell.path}: waits for its stage cells')
         time.sleep(POLL_SECONDS)
         for cell, process in list(running.items()):
           if process.exitcode is None:
