@@ -21,11 +21,11 @@ env steps over the wall time between the first and the last of its
 updates that ended in the window from --warmup to --seconds after the
 start (the benchmark polls each metrics.csv, whose rows are written as
 updates end), so what happens between updates counts and nothing after
-the window does; "two" sums its pair's over the same window. Prints each round's
-rates and the median ratio two / one: above 1, training two cells at once
-gets more of the paper's plan done per hour (each cell then takes longer).
-With --single-threaded the pair runs with the Ray actors' one-thread
-settings.
+the window does; "two" sums its pair's over the same window. Prints each
+round's rates and the median ratio two / one: above 1, training two cells
+at once gets more of the paper's plan done per hour (each cell then takes
+longer). With --single-threaded the pair runs with the Ray actors'
+one-thread settings.
 """
 import argparse
 import csv
