@@ -645,7 +645,8 @@ def run_concurrently(args: PaperArgs, cells: list[paper_plan.Cell],
         if (waiting and not stopped and not failed and deadline
             and run_dir.clock() >= deadline):
           log(f'Out of time (--hours {args.hours:g}) before '
-              f'{", ".join(cell.path for cell in waiting)}.')
+              f'{waiting[0].path}' + (f' and {len(waiting) - 1} other cells'
+                                     if len(waiting) > 1 else '') + '.')
           stopped = run_dir.DEADLINE
         if stopped or failed:
           waiting = []
