@@ -28,7 +28,6 @@ longer). With --single-threaded the pair runs with the Ray actors'
 one-thread settings.
 """
 import argparse
-import csv
 import os
 import shutil
 import signal
@@ -40,6 +39,10 @@ import time
 import numpy as np
 
 REPO = os.path.join(os.path.dirname(os.path.abspath(__file__)), '..')
+sys.path.insert(0, REPO)
+
+from runners import actor_pool  # pylint: disable=g-import-not-at-top
+from runners import plot  # pylint: disable=g-import-not-at-top
 
 
 def _start(task, n_agents, actors, copies, seed, logdir, env=None):
@@ -55,13 +58,12 @@ def _start(task, n_agents, actors, copies, seed, logdir, env=None):
 
 
 def _env_steps(logdir):
-  """The newest row's env steps in the run's metrics.csv (0 before one)."""
-  try:
-    with open(os.path.join(logdir, 'metrics.csv')) as f:
-      rows = list(csv.DictReader(f))
-  except FileNotFoundError:
+  """The newest row's env steps in the run's metrics.csv (0 before one; a
+  row caught half-written reads as fewer, which `measure` skips)."""
+  if not os.path.exists(os.path.join(logdir, 'metrics.csv')):
     return 0
-  return int(rows[-1]['env_steps']) if rows else 0
+  rows = plot.read_metrics(logdir)
+  return int(rows[-1].get('env_steps', 0)) if rows else 0
 
 
 def _stop(process):
@@ -132,11 +134,7 @@ def main(argv=None):
                       'settings (runners.actor_pool.ACTOR_ENV_VARS): XLA '
                       'on one thread for the learner too')
   args = parser.parse_args(argv)
-  env = None
-  if args.single_threaded:
-    sys.path.insert(0, REPO)
-    from runners import actor_pool  # pylint: disable=g-import-not-at-top
-    env = actor_pool.ACTOR_ENV_VARS
+  env = actor_pool.ACTOR_ENV_VARS if args.single_threaded else None
   print(f'{args.task} with {args.n_agents} agents, {os.cpu_count()} CPUs, '
         f'{args.seconds:g} s a configuration, rates after {args.warmup:g} s'
         + (', the pair single-threaded' if env else ''), flush=True)
