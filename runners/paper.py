@@ -24,8 +24,13 @@ Ctrl-C / SIGTERM stop the running cell after a checkpoint (exit status 128
 next session's `coop-paper` resumes from them. `--hours H` does both by
 itself when H hours are up (a session's or a cluster job's time limit):
 the cell stops with a checkpoint, is stashed, and coop-paper exits with
-status 75 (`EXIT_OUT_OF_TIME`). See docs/paper.md.
+status 75 (`EXIT_OUT_OF_TIME`). coop-paper processes that share `--runs`
+and `--results` (on one machine, or on several over a shared file system)
+share the plan: each claims a cell before running it (`claim`) and passes
+over the cells another one runs, exiting with status 3
+(`EXIT_RUN_ELSEWHERE`) if it passed over any. See docs/paper.md.
 """
+import contextlib
 import dataclasses
 import os
 import shutil
@@ -43,6 +48,16 @@ EVAL_FILE = 'eval_n{}.json'
 EXIT_OUT_OF_TIME = 75
 """`coop-paper`'s exit status when `--hours` ran out (sysexits' EX_TEMPFAIL:
 run it again)."""
+EXIT_RUN_ELSEWHERE = 3
+"""`coop-paper`'s exit status when it ran every selected cell it could but
+passed over cells that other coop-paper processes run (`claim`): run it
+again once they have ended."""
+ELSEWHERE = 'elsewhere'
+"""What `run_plan` returns when it passed over such cells."""
+CLAIMS = '.claims'
+"""`--runs`/.claims/<cell>/: the lock (`run_dir.RunLock`) that a coop-paper
+process holds on a cell from before it trains it until it is published or
+stashed (`claim`)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -413,6 +428,45 @@ def unstash(cell: paper_plan.Cell, args: PaperArgs) -> bool:
   return True
 
 
+class CellTaken(Exception):
+  """Another coop-paper process holds the cell's claim."""
+
+
+@contextlib.contextmanager
+def claim(cell: paper_plan.Cell, args: PaperArgs):
+  """Holds `cell`'s claim inside the block: an advisory lock on
+  `--runs`/.claims/<cell>/ (`CLAIMS`), which the kernel drops when the
+  process ends, however it ends. coop-paper processes sharing `--runs` and
+  `--results` thus never run, stash or publish one cell twice, whichever
+  machine they run on (given a file system whose `flock` works across
+  machines: local, NFSv4, Lustre mounted with `flock`).
+
+  Raises:
+    CellTaken: another process holds it (its pid and host in the message).
+  """
+  lock = run_dir.RunLock(os.path.join(args.runs, CLAIMS, cell.name))
+  try:
+    lock.__enter__()
+  except run_dir.RunInUseError as error:
+    raise CellTaken(f'{cell.path}: run by another coop-paper (pid, host: '
+                    f'{error.holder})') from None
+  try:
+    yield
+  finally:
+    lock.__exit__(None, None, None)
+
+
+def _stages_elsewhere(cell: paper_plan.Cell, elsewhere: dict,
+                      args: PaperArgs) -> list[str]:
+  """The stage cells `cell` starts from that other coop-paper processes
+  run (`elsewhere`: {`--results` folder: cell} of the cells passed over)
+  and have not published."""
+  return [os.path.basename(folder)
+          for _, folder in stage_directories(cell, args)
+          if folder in elsewhere
+          and not os.path.exists(os.path.join(folder, 'metrics.csv'))]
+
+
 def run_cell(cell: paper_plan.Cell, args: PaperArgs,
              log: Callable[[str], None] = print,
              deadline: Optional[float] = None) -> Optional[str]:
@@ -458,8 +512,9 @@ def run_plan(args: PaperArgs, plan=None,
              log: Callable[[str], None] = print) -> Optional[str]:
   """Runs every selected cell that is not done, in plan order (with
   `--concurrent` N, N at a time: `run_concurrently`); returns what stopped
-  it early (`run_cell`), else None. Out of `--hours`, the cell it stopped
-  is stashed and no other starts."""
+  it early (`run_cell`), else `ELSEWHERE` if it passed over cells that
+  other coop-paper processes run (`claim`), else None. Out of `--hours`,
+  the cell it stopped is stashed and no other starts."""
   deadline = run_dir.clock() + args.hours * 3600 if args.hours else None
   default = PaperArgs()
   if args.budget and (args.results == default.results
@@ -497,22 +552,35 @@ def _run_in_turn(args: PaperArgs, cells: list[paper_plan.Cell],
   from runners import actor_pool  # pylint: disable=g-import-not-at-top
   owns_ray = args.actors > 0 and actor_pool.init_ray(
       args.ray_address, num_cpus=max(os.cpu_count(), args.actors))
+  elsewhere = {}  # --results folder -> cell, of the cells passed over.
   try:
     for cell in cells:
       if deadline and run_dir.clock() >= deadline:
         log(f'Out of time (--hours {args.hours:g}) before {cell.path}.')
         return run_dir.DEADLINE
-      stopped = run_cell(cell, args, log, deadline)
-      if stopped == run_dir.DEADLINE:
-        folder = stash(cell, args)
-        if not folder:  # Stopped before its first update: start afresh.
-          shutil.rmtree(run_directory(cell, args), ignore_errors=True)
-        log(f'{cell.path}: out of time (--hours {args.hours:g}); '
-            + (f'stashed in {folder}: commit it' if folder
-               else 'no update yet, nothing to stash'))
+      waits = _stages_elsewhere(cell, elsewhere, args)
+      if waits:
+        log(f'{cell.path}: starts from {", ".join(waits)}, which another '
+            'coop-paper runs; passed over')
+        elsewhere[results_directory(cell, args)] = cell
+        continue
+      try:
+        with claim(cell, args):
+          stopped = run_cell(cell, args, log, deadline)
+          if stopped == run_dir.DEADLINE:
+            folder = stash(cell, args)
+            if not folder:  # Stopped before its first update: afresh.
+              shutil.rmtree(run_directory(cell, args), ignore_errors=True)
+            log(f'{cell.path}: out of time (--hours {args.hours:g}); '
+                + (f'stashed in {folder}: commit it' if folder
+                   else 'no update yet, nothing to stash'))
+      except CellTaken as taken:
+        log(f'{taken}; passed over')
+        elsewhere[results_directory(cell, args)] = cell
+        continue
       if stopped:
         return stopped
-    return None
+    return _left_elsewhere(elsewhere, args)
   finally:
     if owns_ray:
       import ray  # pylint: disable=g-import-not-at-top
@@ -531,11 +599,14 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 def exit_status(stopped: Optional[str]) -> int:
   """coop-paper's exit status when `stopped` (what `run_plan` returns)
-  stopped it: 0, `EXIT_OUT_OF_TIME`, or 128 + the signal's number."""
+  stopped it: 0, `EXIT_OUT_OF_TIME`, `EXIT_RUN_ELSEWHERE`, or 128 + the
+  signal's number."""
   if stopped is None:
     return 0
   if stopped == run_dir.DEADLINE:
     return EXIT_OUT_OF_TIME
+  if stopped == ELSEWHERE:
+    return EXIT_RUN_ELSEWHERE
   return 128 + signal.Signals[stopped].value
 
 
@@ -548,6 +619,8 @@ def _ended(status: int, signalled: Optional[str]) -> Optional[str]:
     return None
   if status == EXIT_OUT_OF_TIME:
     return run_dir.DEADLINE
+  if status == EXIT_RUN_ELSEWHERE:
+    return ELSEWHERE
   stops = {128 + s: s.name for s in STOP_SIGNALS}
   if status in stops:
     return stops[status]
@@ -625,10 +698,12 @@ def run_concurrently(args: PaperArgs, cells: list[paper_plan.Cell],
   second stops them at once. Out of --hours, the running cells stop and
   stash themselves and no other starts. Returns what stopped it early, as
   `run_plan`; once a cell's process ends with an error no other starts,
-  and `CellFailed` is raised when the running ones have ended. The cells'
+  and `CellFailed` is raised when the running ones have ended. A cell that
+  another coop-paper runs (its process exits with `EXIT_RUN_ELSEWHERE`) is
+  passed over, and so are the cells that start from it. The cells'
   processes get SIGTERM if this one ends otherwise (an error, or killed)."""
   own = dataclasses.replace(args, concurrent=1, progress=False)
-  waiting, running, told = list(cells), {}, set()
+  waiting, running, told, elsewhere = list(cells), {}, set(), {}
   stopped, signalled, failed = None, None, []
 
   def forward(name):
@@ -650,6 +725,13 @@ def run_concurrently(args: PaperArgs, cells: list[paper_plan.Cell],
           stopped = run_dir.DEADLINE
         if stopped or failed:
           waiting = []
+        for cell in list(waiting):
+          waits = _stages_elsewhere(cell, elsewhere, args)
+          if waits:
+            log(f'{cell.path}: starts from {", ".join(waits)}, which another '
+                'coop-paper runs; passed over')
+            waiting.remove(cell)
+            elsewhere[results_directory(cell, args)] = cell
         startable = _startable(waiting, running, args)
         free = args.concurrent - len(running)
         chosen = startable[:free]
@@ -673,6 +755,8 @@ def run_concurrently(args: PaperArgs, cells: list[paper_plan.Cell],
           if ended == '':
             failed.append(_failure(cell, process.exitcode))
             log(f'{failed[-1]}: failed; no other cell starts')
+          elif ended == ELSEWHERE:  # Its process said so, and by whom.
+            elsewhere[results_directory(cell, args)] = cell
           elif ended:
             stopped = stopped or ended
     except KeyboardInterrupt:  # A second signal: at once, everywhere.
@@ -688,7 +772,14 @@ def run_concurrently(args: PaperArgs, cells: list[paper_plan.Cell],
   if failed:
     raise CellFailed(f'{", ".join(failed)} failed (its error, if any, is '
                      'above).')
-  return stopped
+  return stopped or _left_elsewhere(elsewhere, args)
+
+
+def _left_elsewhere(elsewhere: dict, args: PaperArgs) -> Optional[str]:
+  """`ELSEWHERE` if a cell passed over is not done yet, else None (the
+  other processes finished them meanwhile)."""
+  return (ELSEWHERE if any(not is_done(cell, args)
+                           for cell in elsewhere.values()) else None)
 
 
 def _command(args: PaperArgs) -> Optional[str]:
@@ -708,7 +799,14 @@ def _command(args: PaperArgs) -> Optional[str]:
   elif args.dry_run:
     print(dry_run(args))
   elif args.stash:
-    folders = [f for f in (stash(c, args) for c in selected(args)) if f]
+    folders = []
+    for cell in selected(args):
+      try:
+        with claim(cell, args):
+          folders.append(stash(cell, args))
+      except CellTaken as taken:
+        print(f'{taken}: not stashed (it stashes itself at its --hours)')
+    folders = [f for f in folders if f]
     print('\n'.join(['Stashed (commit these; the next coop-paper resumes '
                      'from them):', *folders]) if folders
           else 'No unfinished run to stash.')
@@ -730,6 +828,11 @@ def main(argv=None):
     print('Out of time: run the same coop-paper command again to continue '
           '(after committing a stash, if one was made).', flush=True)
     sys.exit(EXIT_OUT_OF_TIME)
+  if stopped == ELSEWHERE:
+    print('Every other selected cell is done; the ones passed over above '
+          'are run by other coop-paper processes: run the same command again '
+          'once they have ended.', flush=True)
+    sys.exit(EXIT_RUN_ELSEWHERE)
   if stopped:
     print(f'Stopped by {stopped}; run the same coop-paper command again to '
           'continue.', flush=True)

@@ -42,7 +42,10 @@ _LEFTOVER = re.compile(r'\.(tmp|old)-(\d+)$')
 
 
 class RunInUseError(RuntimeError):
-  """Another live process is writing to the run directory."""
+  """Another live process is writing to the run directory (its pid and
+  host in `holder`)."""
+
+  holder = 'unknown'
 
 
 class RunLock:
@@ -74,10 +77,12 @@ class RunLock:
         handle.close()
         if e.errno not in (errno.EAGAIN, errno.EACCES):
           raise
-        raise RunInUseError(
+        error = RunInUseError(
             f'{self._logdir} is being written by another run (pid, host: '
             f'{holder}); wait for it to finish, stop it, or choose another '
-            '--logdir.') from None
+            '--logdir.')
+        error.holder = holder
+        raise error from None
       # The file may have been removed (by `__exit__` of a run that set up
       # nothing) between our open and our lock: then lock the new one.
       try:
@@ -96,7 +101,10 @@ class RunLock:
   def __exit__(self, *exc):
     if self._created and os.listdir(self._logdir) == [LOCK_FILE]:
       os.remove(self._path)  # Still locked: no one can hold a stale inode.
-      os.rmdir(self._logdir)
+      try:
+        os.rmdir(self._logdir)
+      except OSError:  # Another process has locked a new file in it.
+        pass
     self._file.close()  # Releases the lock.
     self._file = None
 

@@ -1,10 +1,12 @@
 """coop-paper on tiny budgets and fixture results, and coop-eval --json."""
 import csv
 import dataclasses
+import functools
 import json
 import os
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -477,6 +479,79 @@ def test_concurrent_cells_fill_their_slots_and_wait_for_their_stages(
                    *starts[2:]]
 
 
+def test_processes_sharing_the_runs_pass_over_each_others_cells(
+    tmp_path, monkeypatch, capsys):
+  """Another coop-paper (here: a claim held in this process, which flock
+  tells apart as another open file) runs the pushers stage: this one passes
+  it over, and the joint cell too unless the stage is published meanwhile;
+  every other cell runs under its claim, and no claim is left behind."""
+  pushers, crossers, joint, corridor = cells = _plan_cells(
+      'ravine/hrl/pushers/n2/s1', 'ravine/hrl/crossers/n2/s1',
+      'ravine/hrl/n2/s1', 'corridor/hrl/n4/s1')
+  args = _args(tmp_path)
+  ran = []
+
+  def run_cell(cell, args, log, deadline, publishes=None):
+    with pytest.raises(paper.CellTaken, match=f'^{cell.path}: run by another'):
+      with paper.claim(cell, args):
+        pass  # Held by the process that runs it.
+    ran.append(cell)
+    if cell == crossers and publishes:  # The other process ends meanwhile.
+      _commit(publishes, args, {2: [1, 0]})
+  holder = f'{os.getpid()} {socket.gethostname()}'
+  taken = (f'{pushers.path}: run by another coop-paper (pid, host: '
+           f'{holder}); passed over')
+  with paper.claim(pushers, args):
+    monkeypatch.setattr(paper, 'run_cell', run_cell)
+    lines = []
+    assert paper.run_plan(args, cells, lines.append) == paper.ELSEWHERE
+    assert ran == [crossers, corridor]
+    assert lines == [taken, f'{joint.path}: starts from '
+                     'ravine_hrl_pushers_n2_s1, which another coop-paper '
+                     'runs; passed over']
+    ran, lines = [], []
+    monkeypatch.setattr(paper, 'run_cell', functools.partial(
+        run_cell, publishes=pushers))
+    # Nothing is left undone: the passed-over cell was published.
+    assert paper.run_plan(args, cells, lines.append) is None
+    assert ran == [crossers, joint, corridor] and lines == [taken]
+    # --stash leaves a cell that another process runs alone.
+    paper.main([f'--results={args.results}', f'--runs={args.runs}',
+                f'--partial={args.partial}', '--stash',
+                f'--only={pushers.path}'])
+    assert capsys.readouterr().out.splitlines()[0] == (
+        f'{pushers.path}: run by another coop-paper (pid, host: {holder}): '
+        'not stashed (it stashes itself at its --hours)')
+  assert os.listdir(os.path.join(args.runs, paper.CLAIMS)) == []
+  # Its exit status says: run it again once the others have ended.
+  monkeypatch.setattr(paper, 'run_plan', lambda *a, **k: paper.ELSEWHERE)
+  with pytest.raises(SystemExit) as exit_info:
+    paper.main([f'--results={args.results}', f'--runs={args.runs}',
+                f'--partial={args.partial}', '--actors=0'])
+  assert exit_info.value.code == paper.EXIT_RUN_ELSEWHERE == 3
+  assert 'run by other coop-paper processes' in capsys.readouterr().out
+
+
+def test_concurrent_cells_pass_over_cells_run_elsewhere(tmp_path,
+                                                        monkeypatch):
+  monkeypatch.setattr(paper, 'POLL_SECONDS', 0.05)
+  pushers, crossers, joint, corridor = cells = _plan_cells(
+      'ravine/hrl/pushers/n2/s1', 'ravine/hrl/crossers/n2/s1',
+      'ravine/hrl/n2/s1', 'corridor/hrl/n4/s1')
+  started, lines = [], []
+
+  def start(cell, own, deadline):
+    started.append(cell)  # The pushers' process finds them claimed.
+    return _FakeCellProcess(0.1, paper.EXIT_RUN_ELSEWHERE if cell == pushers
+                            else 0)
+  assert paper.run_concurrently(_args(tmp_path, concurrent=2), cells,
+                                lines.append, None,
+                                start=start) == paper.ELSEWHERE
+  assert started == [pushers, crossers, corridor]
+  assert (f'{joint.path}: starts from ravine_hrl_pushers_n2_s1, which '
+          'another coop-paper runs; passed over') in lines
+
+
 def test_concurrent_cells_stop_together(tmp_path, monkeypatch):
   monkeypatch.setattr(paper, 'POLL_SECONDS', 0.05)
   first, second, third = cells = _plan_cells(
@@ -532,7 +607,8 @@ def test_concurrent_cells_stop_together(tmp_path, monkeypatch):
                        'cell starts')
   # How a cell's process ended, from its exit status: a stop is one only
   # for the signals passed on; after one, dying by it is its stop too.
-  for stopped in (None, run_dir.DEADLINE, 'SIGINT', 'SIGTERM'):
+  for stopped in (None, run_dir.DEADLINE, paper.ELSEWHERE, 'SIGINT',
+                  'SIGTERM'):
     assert paper._ended(paper.exit_status(stopped), None) == stopped  # pylint: disable=protected-access
   for status in (1, 2, -9, -15, 128 + signal.SIGKILL):
     assert paper._ended(status, None) == ''  # pylint: disable=protected-access
