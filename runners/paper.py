@@ -28,7 +28,8 @@ status 75 (`EXIT_OUT_OF_TIME`). coop-paper processes that share `--runs`
 and `--results` (on one machine, or on several over a shared file system)
 share the plan: each claims a cell before running it (`claim`) and passes
 over the cells another one runs, exiting with status 3
-(`EXIT_RUN_ELSEWHERE`) if it passed over any. See docs/paper.md.
+(`EXIT_RUN_ELSEWHERE`) if one of those is still not done at its end. See
+docs/paper.md.
 """
 import contextlib
 import dataclasses
@@ -382,7 +383,9 @@ def _copy_run(logdir: str, checkpoint: str, final: str,
   from runners import run_dir  # pylint: disable=g-import-not-at-top
   parent = os.path.dirname(final)
   os.makedirs(parent, exist_ok=True)
-  run_dir.remove_stale(parent)
+  # Only `final`'s leftovers: its cell's claim (`claim`) makes this the
+  # one process writing it, where other machines may write beside it.
+  run_dir.remove_stale(parent, os.path.basename(final))
   tmp = f'{final}.tmp-{os.getpid()}'
   shutil.rmtree(tmp, ignore_errors=True)
   os.makedirs(os.path.join(tmp, 'checkpoints'))
@@ -512,8 +515,9 @@ def run_plan(args: PaperArgs, plan=None,
              log: Callable[[str], None] = print) -> Optional[str]:
   """Runs every selected cell that is not done, in plan order (with
   `--concurrent` N, N at a time: `run_concurrently`); returns what stopped
-  it early (`run_cell`), else `ELSEWHERE` if it passed over cells that
-  other coop-paper processes run (`claim`), else None. Out of `--hours`,
+  it early (`run_cell`), else `ELSEWHERE` if a cell it passed over because
+  another coop-paper process runs it (`claim`) is still not done, else
+  None. Out of `--hours`,
   the cell it stopped is stashed and no other starts."""
   deadline = run_dir.clock() + args.hours * 3600 if args.hours else None
   default = PaperArgs()
@@ -805,7 +809,7 @@ def _command(args: PaperArgs) -> Optional[str]:
         with claim(cell, args):
           folders.append(stash(cell, args))
       except CellTaken as taken:
-        print(f'{taken}: not stashed (it stashes itself at its --hours)')
+        print(f'{taken}: not stashed')
     folders = [f for f in folders if f]
     print('\n'.join(['Stashed (commit these; the next coop-paper resumes '
                      'from them):', *folders]) if folders

@@ -68,7 +68,10 @@ class RunLock:
     self._created = not os.path.isdir(self._logdir)
     while True:
       os.makedirs(self._logdir, exist_ok=True)
-      handle = open(self._path, 'a+')  # pylint: disable=consider-using-with
+      try:
+        handle = open(self._path, 'a+')  # pylint: disable=consider-using-with
+      except FileNotFoundError:  # Its holder's `__exit__` removed it all.
+        continue
       try:
         fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
       except OSError as e:
@@ -194,11 +197,15 @@ def write_directory(final: str, files) -> None:
   replace_directory(tmp, final)
 
 
-def remove_stale(directory: str) -> None:
-  """Removes `.tmp-<pid>` / `.old-<pid>` leftovers in `directory` whose
-  writer is dead (never a live writer's work in progress); an `.old-` whose
-  directory is missing is put back instead."""
-  for path in glob.glob(os.path.join(glob.escape(directory), '*.*-*')):
+def remove_stale(directory: str, name: str = '') -> None:
+  """Removes `.tmp-<pid>` / `.old-<pid>` leftovers in `directory` (only
+  `name`'s, if given) whose writer is dead (never a live writer's work in
+  progress); an `.old-` whose directory is missing is put back instead.
+  Whether a writer lives is asked of this machine: where processes of
+  other machines write into `directory` too, give the `name` that only
+  this process writes."""
+  pattern = (glob.escape(name) if name else '*') + '.*-*'
+  for path in glob.glob(os.path.join(glob.escape(directory), pattern)):
     match = _LEFTOVER.search(path)
     if not match:
       continue

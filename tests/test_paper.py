@@ -521,8 +521,16 @@ def test_processes_sharing_the_runs_pass_over_each_others_cells(
                 f'--only={pushers.path}'])
     assert capsys.readouterr().out.splitlines()[0] == (
         f'{pushers.path}: run by another coop-paper (pid, host: {holder}): '
-        'not stashed (it stashes itself at its --hours)')
+        'not stashed')
   assert os.listdir(os.path.join(args.runs, paper.CLAIMS)) == []
+  # A cell that fails lets go of its claim.
+  def failing(cell, *_):
+    raise ValueError(f'{cell.path} failed')
+  monkeypatch.setattr(paper, 'run_cell', failing)
+  with pytest.raises(ValueError, match=f'{crossers.path} failed'):
+    paper.run_plan(args, [crossers], log=lambda line: None)
+  with paper.claim(crossers, args):
+    pass
   # Its exit status says: run it again once the others have ended.
   monkeypatch.setattr(paper, 'run_plan', lambda *a, **k: paper.ELSEWHERE)
   with pytest.raises(SystemExit) as exit_info:
@@ -544,12 +552,23 @@ def test_concurrent_cells_pass_over_cells_run_elsewhere(tmp_path,
     started.append(cell)  # The pushers' process finds them claimed.
     return _FakeCellProcess(0.1, paper.EXIT_RUN_ELSEWHERE if cell == pushers
                             else 0)
-  assert paper.run_concurrently(_args(tmp_path, concurrent=2), cells,
-                                lines.append, None,
+  args = _args(tmp_path, concurrent=2)
+  assert paper.run_concurrently(args, cells, lines.append, None,
                                 start=start) == paper.ELSEWHERE
   assert started == [pushers, crossers, corridor]
   assert (f'{joint.path}: starts from ravine_hrl_pushers_n2_s1, which '
           'another coop-paper runs; passed over') in lines
+  # Published by the other process while the crossers trained here: the
+  # joint cell starts once both stages are in, and nothing is left.
+  started, lines = [], []
+
+  def start_publishing(cell, own, deadline):
+    if cell == crossers:
+      _commit(pushers, args, {2: [1, 0]})
+    return start(cell, own, deadline)
+  assert paper.run_concurrently(args, cells, lines.append, None,
+                                start=start_publishing) is None
+  assert started == [pushers, crossers, corridor, joint]
 
 
 def test_concurrent_cells_stop_together(tmp_path, monkeypatch):

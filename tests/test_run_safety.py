@@ -100,6 +100,24 @@ def test_second_writer_is_refused_until_the_first_dies(tmp_path):
         == str(os.getpid())
 
 
+def test_a_lock_whose_holder_just_left_is_taken(tmp_path, monkeypatch):
+  """The holder of a new directory's lock removes it as it leaves; one
+  coming in between making the directory and opening its lock file makes
+  it again and takes the lock."""
+  logdir = str(tmp_path / 'claim')
+  opened = []
+
+  def open_after_holder_left(path, *args):
+    if not opened:  # The holder's `__exit__` runs just now.
+      shutil.rmtree(logdir)
+    opened.append(path)
+    return open(path, *args)
+  monkeypatch.setattr(run_dir, 'open', open_after_holder_left, raising=False)
+  with run_dir.RunLock(logdir) as lock:
+    assert len(opened) == 2 and os.path.isfile(opened[-1])
+  assert lock._file is None  # pylint: disable=protected-access
+
+
 def test_training_takes_the_lock_before_checking_the_directory(controller,
                                                                tmp_path):
   logdir = str(tmp_path / 'run')
@@ -130,9 +148,15 @@ def test_only_dead_writers_temporaries_are_removed(tmp_path):
     dead = f'{directory}.tmp-{_dead_pid()}'
     for path in (live, dead):
       os.makedirs(path)
-    run_dir.remove_stale(str(tmp_path))
+    # Named: only that name's (a writer on another machine looks dead here).
+    other = f'{tmp_path}/other.tmp-{_dead_pid()}'
+    os.makedirs(other)
+    run_dir.remove_stale(str(tmp_path), 'controller')
     assert os.path.isdir(live)  # Another writer's work in progress.
     assert not os.path.exists(dead)
+    assert os.path.isdir(other)
+    run_dir.remove_stale(str(tmp_path))
+    assert not os.path.exists(other) and os.path.isdir(live)
   finally:
     holder.kill()
     holder.wait()
