@@ -159,6 +159,11 @@ def stage_directories(cell: paper_plan.Cell, args: PaperArgs
           for species, name in cell.init_from]
 
 
+def claim_directory(cell: paper_plan.Cell, args: PaperArgs) -> str:
+  """Where the lock of the cell's claim (`claim`) goes."""
+  return os.path.join(args.runs, CLAIMS, cell.name)
+
+
 def partial_directory(cell: paper_plan.Cell, args: PaperArgs) -> str:
   return os.path.join(args.partial, cell.name)
 
@@ -298,7 +303,8 @@ def selected(args: PaperArgs, plan=None) -> list[paper_plan.Cell]:
 
 def dry_run(args: PaperArgs, plan=None) -> str:
   """The plan as text: per cell its status, budget, estimated remaining
-  wall time on this machine and command; then the total."""
+  wall time on this machine and command (and which coop-paper process
+  runs it, if one holds its `claim`); then the total."""
   lines, total = [f'{"cell":32s} {"status":22s} {"budget":>7s}  '
                   f'{"to go":>9s}  command'], 0.0
   cells = selected(args, plan)
@@ -315,6 +321,9 @@ def dry_run(args: PaperArgs, plan=None) -> str:
                  f'{command(cell, args)}')
     if state.problem:
       lines.append(f'  ! {state.problem}')
+    holder = run_dir.lock_holder(claim_directory(cell, args))
+    if holder:
+      lines.append(f'  running: coop-paper pid, host {holder}')
   lines.append(f'{len(cells)} cells, ~{total / 3600:.0f} h to go at '
                f'{paper_plan.AGENT_STEPS_PER_SECOND:,.0f} Ant steps/s, '
                + ', '.join(f'{agent} at {share:g} of it'
@@ -447,7 +456,7 @@ def claim(cell: paper_plan.Cell, args: PaperArgs):
   Raises:
     CellTaken: another process holds it (its pid and host in the message).
   """
-  lock = run_dir.RunLock(os.path.join(args.runs, CLAIMS, cell.name))
+  lock = run_dir.RunLock(claim_directory(cell, args))
   try:
     lock.__enter__()
   except run_dir.RunInUseError as error:

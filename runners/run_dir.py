@@ -112,6 +112,27 @@ class RunLock:
     self._file = None
 
 
+def lock_holder(logdir: str) -> str:
+  """Who holds `logdir`'s `RunLock`: the '<pid> <host>' it wrote, or ''
+  when no process does. Asks with a shared lock taken and dropped at once:
+  a `RunLock` tried in that instant is refused as if held, so this is for
+  locks whose refusal only defers work (coop-paper's claims), not for a
+  run directory whose training would then fail."""
+  try:
+    handle = open(os.path.join(logdir, LOCK_FILE))  # pylint: disable=consider-using-with
+  except FileNotFoundError:
+    return ''
+  with handle:
+    try:
+      fcntl.flock(handle, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except OSError as e:
+      if e.errno not in (errno.EAGAIN, errno.EACCES):
+        raise
+      return handle.read().strip() or 'unknown'
+    fcntl.flock(handle, fcntl.LOCK_UN)
+  return ''
+
+
 # --- Crash-safe writes --------------------------------------------------------
 
 

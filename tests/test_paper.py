@@ -502,6 +502,14 @@ def test_processes_sharing_the_runs_pass_over_each_others_cells(
   taken = (f'{pushers.path}: run by another coop-paper (pid, host: '
            f'{holder}); passed over')
   with paper.claim(pushers, args):
+    # --dry-run names the holder (and the probe leaves the claim held).
+    text = paper.dry_run(args, cells).splitlines()
+    assert text[2] == f'  running: coop-paper pid, host {holder}'
+    assert text[1].startswith(pushers.path)
+    assert not any('running' in line for line in text[3:])
+    with pytest.raises(paper.CellTaken):
+      with paper.claim(pushers, args):
+        pass
     monkeypatch.setattr(paper, 'run_cell', run_cell)
     lines = []
     assert paper.run_plan(args, cells, lines.append) == paper.ELSEWHERE
@@ -523,6 +531,7 @@ def test_processes_sharing_the_runs_pass_over_each_others_cells(
         f'{pushers.path}: run by another coop-paper (pid, host: {holder}): '
         'not stashed')
   assert os.listdir(os.path.join(args.runs, paper.CLAIMS)) == []
+  assert 'running' not in paper.dry_run(args, cells)
   # A cell that fails lets go of its claim.
   def failing(cell, *_):
     raise ValueError(f'{cell.path} failed')
