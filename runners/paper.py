@@ -526,8 +526,8 @@ def run_plan(args: PaperArgs, plan=None,
   `--concurrent` N, N at a time: `run_concurrently`); returns what stopped
   it early (`run_cell`), else `ELSEWHERE` if a cell it passed over because
   another coop-paper process runs it (`claim`) is still not done, else
-  None. Out of `--hours`,
-  the cell it stopped is stashed and no other starts."""
+  None. Out of `--hours`, the cell it stopped is stashed and no other
+  starts."""
   deadline = run_dir.clock() + args.hours * 3600 if args.hours else None
   default = PaperArgs()
   if args.budget and (args.results == default.results
