@@ -468,15 +468,22 @@ def claim(cell: paper_plan.Cell, args: PaperArgs):
     lock.__exit__(None, None, None)
 
 
-def _stages_elsewhere(cell: paper_plan.Cell, elsewhere: dict,
-                      args: PaperArgs) -> list[str]:
-  """The stage cells `cell` starts from that other coop-paper processes
-  run (`elsewhere`: {`--results` folder: cell} of the cells passed over)
-  and have not published."""
-  return [os.path.basename(folder)
-          for _, folder in stage_directories(cell, args)
-          if folder in elsewhere
-          and not os.path.exists(os.path.join(folder, 'metrics.csv'))]
+def _passed_over_for_stages(cell: paper_plan.Cell, elsewhere: dict,
+                            args: PaperArgs,
+                            log: Callable[[str], None]) -> bool:
+  """Whether `cell` starts from stage cells that other coop-paper
+  processes run (`elsewhere`: {`--results` folder: cell} of the cells
+  passed over) and have not published; if so it is passed over too: said,
+  and added to `elsewhere`."""
+  waits = [os.path.basename(folder)
+           for _, folder in stage_directories(cell, args)
+           if folder in elsewhere
+           and not os.path.exists(os.path.join(folder, 'metrics.csv'))]
+  if waits:
+    log(f'{cell.path}: starts from {", ".join(waits)}, which another '
+        'coop-paper runs; passed over')
+    elsewhere[results_directory(cell, args)] = cell
+  return bool(waits)
 
 
 def run_cell(cell: paper_plan.Cell, args: PaperArgs,
@@ -571,11 +578,7 @@ def _run_in_turn(args: PaperArgs, cells: list[paper_plan.Cell],
       if deadline and run_dir.clock() >= deadline:
         log(f'Out of time (--hours {args.hours:g}) before {cell.path}.')
         return run_dir.DEADLINE
-      waits = _stages_elsewhere(cell, elsewhere, args)
-      if waits:
-        log(f'{cell.path}: starts from {", ".join(waits)}, which another '
-            'coop-paper runs; passed over')
-        elsewhere[results_directory(cell, args)] = cell
+      if _passed_over_for_stages(cell, elsewhere, args, log):
         continue
       try:
         with claim(cell, args):
@@ -738,13 +741,8 @@ def run_concurrently(args: PaperArgs, cells: list[paper_plan.Cell],
           stopped = run_dir.DEADLINE
         if stopped or failed:
           waiting = []
-        for cell in list(waiting):
-          waits = _stages_elsewhere(cell, elsewhere, args)
-          if waits:
-            log(f'{cell.path}: starts from {", ".join(waits)}, which another '
-                'coop-paper runs; passed over')
-            waiting.remove(cell)
-            elsewhere[results_directory(cell, args)] = cell
+        waiting = [cell for cell in waiting if not _passed_over_for_stages(
+            cell, elsewhere, args, log)]
         startable = _startable(waiting, running, args)
         free = args.concurrent - len(running)
         chosen = startable[:free]
