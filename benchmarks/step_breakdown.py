@@ -18,6 +18,21 @@ all copies at once, and each copy's outcome phase, `docs/performance.md`).
 Run it pinned to one core with the actors' settings, e.g.
 `JAX_PLATFORMS=cpu OMP_NUM_THREADS=1
 XLA_FLAGS=--xla_cpu_multi_thread_eigen=false taskset -c 1 python ...`.
+
+    python benchmarks/step_breakdown.py --rollout [--checkpoint PATH]
+
+`--rollout` times what an actor's `RolloutWorker.collect` does in training:
+the same pieces plus the episodes' resets, the policy's input rows and the
+upper and middle layers (acting and recording the trajectory), with a
+fresh learner's policy or a trained one (`--checkpoint`, a run or one of
+its checkpoints; its task and population), episodes ending as they do in
+training. It also replays each rollout's own controls on a bare simulator
+(`training_throughput`'s raw loop, episode by episode from each one's start
+state), and, alternating with the rollouts, the same copies under random
+commands, so that it prints the rollout / raw on its own trajectories and
+whether the policy's trajectories cost MuJoCo more than random commands'
+(what the lockstep ratio is measured on). It pins itself to one core with
+the actors' settings.
 """
 
 import argparse
@@ -52,9 +67,19 @@ def main():
   parser.add_argument("--lockstep", action="store_true",
                       help="copies in lockstep with the lower layer")
   parser.add_argument("--copies", type=int, default=16)
+  parser.add_argument("--rollout", action="store_true",
+                      help="an actor's rollouts with a policy")
+  parser.add_argument("--checkpoint", default="",
+                      help="--rollout: the policy (a run or a checkpoint); "
+                      "a fresh learner's if empty")
+  parser.add_argument("--rounds", type=int, default=4,
+                      help="--rollout: rollouts timed (after one warm-up)")
   args = parser.parse_args()
   if args.lockstep:
     lockstep(args)
+    return
+  if args.rollout:
+    rollout_breakdown(args)
     return
   from coop_suite.fast import stepping  # pylint: disable=g-import-not-at-top
   env = coop_suite.load(args.task, args.n_agents, seed=0, time_limit=1e9)
@@ -160,6 +185,116 @@ def lockstep(args):
     print(f"  {label:30s} {totals[name] / total:5.2f}")
   rest = 1 - sum(totals.values()) / total
   print(f"  {'rest (commands, rows)':30s} {rest:5.2f}")
+
+
+_ROLLOUT_PIECES = (
+    "physics substeps", "physics phase", "lower-layer input",
+    "lower-layer call", "outcome phase", "episode resets", "policy rows",
+    "upper and middle layers")
+
+
+def rollout_breakdown(args):
+  """An actor's rollouts, timed piece by piece (see the module doc)."""
+  # pylint: disable=g-import-not-at-top
+  from runners import actor_pool
+  # Before JAX starts its backend (its first computation), which reads them.
+  os.environ.update(actor_pool.ACTOR_ENV_VARS)
+  os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[-1]})
+  import training_throughput  # Its raw loop (this script's folder).
+  from coop_suite.fast import stepping
+  from runners import config as config_lib
+  from runners import evaluate
+  from runners import learner_loop
+  from runners import rollout
+  # pylint: enable=g-import-not-at-top
+  if args.checkpoint:
+    spec, config, models, _ = evaluate.load_model(
+        args.checkpoint, evaluate.EvalArgs(checkpoint=(args.checkpoint,)))
+    learners = {name: model[3] for name, model in models.items()}
+    what = args.checkpoint
+  else:
+    train_args = config_lib.TrainArgs(
+        task=args.task, n_agents=args.n_agents, envs_per_actor=args.copies,
+        logdir="", progress=False, total_steps=1)
+    spec, _, learners = learner_loop.fresh_learners(train_args)
+    config = train_args.hierarchy
+    what = "a fresh learner"
+  variables = learner_loop.actor_variables(learners)
+  worker = rollout.RolloutWorker(spec, config, 0, 0, args.copies)
+  worker.collect(variables, 0)  # Warm-up: build, compile, fill the caches.
+  # pylint: disable=protected-access
+  batch, actors = worker._batch, worker._actors
+  raw_envs = [copy.env if spec.uses_commands else copy
+              for copy in batch.envs]
+  recorders = [training_throughput._Controls(env) for env in raw_envs]
+  totals = collections.defaultdict(float)
+  _time_physics(stepping, totals)
+  if batch._controller is not None:
+    controller = type(batch._controller)
+    controller.act = _timed(controller.act, totals, "lower-layer call")
+  batch._physics.step_physics = _timed(batch._physics.step_physics, totals,
+                                       "physics phase")
+  batch._compute_rows = _timed(batch._compute_rows, totals, "policy rows")
+  for copy, env in zip(batch.envs, raw_envs):
+    if spec.uses_commands:
+      copy.controller_input = _timed(copy.controller_input, totals,
+                                     "lower-layer input")
+    env.step_outcome = _timed(env.step_outcome, totals, "outcome phase")
+    copy.reset = _timed(copy.reset, totals, "episode resets")
+  for actor in actors.values():
+    for name in ("select_action", "observe", "take_rollout"):
+      setattr(actor, name, _timed(getattr(actor, name), totals,
+                                  "upper and middle layers"))
+  # pylint: enable=protected-access
+  substeps = raw_envs[0].task.physics_steps_per_control_step
+  rng = np.random.default_rng(0)
+  out = collections.defaultdict(list)
+  timed = collections.defaultdict(float)
+  total = steps = episodes = 0
+  for r in range(args.rounds):
+    for recorder in recorders:
+      recorder.begin()
+    totals.clear()
+    start = time.perf_counter()
+    result = worker.collect(variables, r + 1)
+    seconds = time.perf_counter() - start
+    for name, value in totals.items():
+      timed[name] += value
+    total += seconds
+    steps += result.env_steps
+    episodes += len(result.episodes)
+    raw = sum(rec.replay_seconds(substeps) for rec in recorders)
+    out["rollout"].append(result.env_steps / seconds)
+    out["raw own"].append(sum(rec.steps for rec in recorders) / raw)
+    out["rollout / raw own"].append(raw / seconds)
+    # The same copies under random commands (or joint actions), replayed.
+    for recorder in recorders:
+      recorder.begin()
+    for _ in range(config.sequence_length):
+      batch.step({s.name: rng.uniform(
+          *(s.action_bounds or (-1.0, 1.0)),
+          (len(batch.rows[s.name][0]), s.action_size))
+                  for s in batch.species})
+    raw = sum(rec.replay_seconds(substeps) for rec in recorders)
+    out["raw random"].append(sum(rec.steps for rec in recorders) / raw)
+  median = {k: float(np.median(v)) for k, v in out.items()}
+  print(f"{spec.task} with {spec.n_agents} agents, {what}: {args.rounds} "
+        f"rollouts of {args.copies} copies x {config.sequence_length} "
+        f"commands, {episodes} episodes ended (medians over rollouts)")
+  print(f"  rollout {median['rollout']:,.0f} env steps/s; raw on its own "
+        f"trajectories {median['raw own']:,.0f} control steps/s: rollout / "
+        f"raw {median['rollout / raw own']:.2f}")
+  print(f"  raw on random commands' trajectories {median['raw random']:,.0f}"
+        f" control steps/s: own / random "
+        f"{median['raw own'] / median['raw random']:.2f}")
+  timed["physics phase"] -= timed["physics substeps"]
+  print(f"  one control step of one copy = 1.00 ({total / steps * 1e6:.0f} "
+        f"us)")
+  for name in _ROLLOUT_PIECES:
+    label = name + (" (the rest)" if name == "physics phase" else "")
+    print(f"    {label:30s} {timed[name] / total:5.2f}")
+  rest = 1 - sum(timed.values()) / total
+  print(f"    {'rest (batch, timers)':30s} {rest:5.2f}")
 
 
 if __name__ == "__main__":

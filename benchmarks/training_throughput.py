@@ -68,42 +68,61 @@ LONG_EPISODE = 10_000.0
 
 class _Controls:
   """Records the controls a coop_suite environment applies at each step,
-  with the physics state each block starts from, for a raw replay."""
+  with the physics state each block, and each episode begun inside it,
+  starts from, for a raw replay."""
 
   def __init__(self, env):
-    self.physics = env.physics
-    self.start = mujoco.MjData(self.physics.model.ptr)
-    self.controls = []
-    data = self.physics.data.ptr  # MuJoCo's own: dm_control's view costs.
+    self._env = env
+    self.segments = []  # [(model, MjData at the segment's start, controls)]
     # `step_outcome` ends every step, whole or in phases; older commits (the
     # "before" figures of docs/performance.md) step only through `step`.
     name = 'step_outcome' if hasattr(env, 'step_outcome') else 'step'
-    inner = getattr(env, name)
+    inner, reset = getattr(env, name), env.reset
 
     def recording(*args, **kwargs):
       timestep = inner(*args, **kwargs)
-      self.controls.append(data.ctrl.copy())
+      self.segments[-1][2].append(self._data.ctrl.copy())
+      return timestep
+
+    def resetting():
+      timestep = reset()
+      self._segment()  # A new episode: the replay starts from its state.
       return timestep
     setattr(env, name, recording)
+    env.reset = resetting
     self.begin()
+
+  @property
+  def steps(self) -> int:
+    """Control steps recorded since `begin`."""
+    return sum(len(controls) for _, _, controls in self.segments)
 
   def begin(self):
     """Marks the start of a block."""
-    model = self.physics.model.ptr
-    mujoco.mj_copyData(self.start, model, self.physics.data.ptr)
-    self.controls = []
+    self.segments = []
+    self._segment()
+
+  def _segment(self):
+    physics = self._env.physics  # A reset may have recompiled it.
+    self._data = physics.data.ptr  # MuJoCo's own: dm_control's view costs.
+    model = physics.model.ptr
+    start = mujoco.MjData(model)
+    mujoco.mj_copyData(start, model, self._data)
+    self.segments.append((model, start, []))
 
   def replay_seconds(self, substeps):
     """Seconds of the raw loop through the block's controls."""
-    model = self.physics.model.ptr
-    data = mujoco.MjData(model)
-    mujoco.mj_copyData(data, model, self.start)
-    begin = time.perf_counter()
-    for control in self.controls:
-      data.ctrl[:] = control
-      for _ in range(substeps):
-        mujoco.mj_step(model, data)
-    return time.perf_counter() - begin
+    seconds = 0.0
+    for model, start, controls in self.segments:
+      data = mujoco.MjData(model)
+      mujoco.mj_copyData(data, model, start)
+      begin = time.perf_counter()
+      for control in controls:
+        data.ctrl[:] = control
+        for _ in range(substeps):
+          mujoco.mj_step(model, data)
+      seconds += time.perf_counter() - begin
+    return seconds
 
 
 def _ratio(run_block, recorders, substeps, blocks):
@@ -118,7 +137,7 @@ def _ratio(run_block, recorders, substeps, blocks):
     seconds = time.perf_counter() - begin
     raw = sum(r.replay_seconds(substeps) for r in recorders)
     ratios.append(raw / seconds)
-    raw_rates.append(sum(len(r.controls) for r in recorders) / raw)
+    raw_rates.append(sum(r.steps for r in recorders) / raw)
   return float(np.median(ratios)), float(np.median(raw_rates))
 
 
