@@ -28,11 +28,13 @@ fresh learner's policy or a trained one (`--checkpoint`, a run or one of
 its checkpoints; its task and population), episodes ending as they do in
 training. It also replays each rollout's own controls on a bare simulator
 (`training_throughput`'s raw loop, episode by episode from each one's start
-state), and, alternating with the rollouts, the same copies under random
-commands, so that it prints the rollout / raw on its own trajectories and
-whether the policy's trajectories cost MuJoCo more than random commands'
-(what the lockstep ratio is measured on). It pins itself to one core with
-the actors' settings.
+state) and, alternating with the rollouts, two references, each replayed
+the same way: copies made from the same seeds under random commands (what
+the lockstep ratio is measured on), and one environment under random joint
+actions (the raw rate of `training_throughput.py`'s pipeline rows). So it
+prints the rollout / raw on its own trajectories, and how much physics the
+policy's trajectories cost against the references'. It re-runs itself
+pinned to one core with the actors' settings.
 """
 
 import argparse
@@ -79,6 +81,7 @@ def main():
     lockstep(args)
     return
   if args.rollout:
+    _pinned_with_actor_settings()
     rollout_breakdown(args)
     return
   from coop_suite.fast import stepping  # pylint: disable=g-import-not-at-top
@@ -193,13 +196,23 @@ _ROLLOUT_PIECES = (
     "upper and middle layers")
 
 
+def _pinned_with_actor_settings():
+  """Re-runs this script pinned to one core with the actors' settings (set
+  before numpy, numba and JAX start their threads), unless it already is."""
+  import sys  # pylint: disable=g-import-not-at-top
+  from runners import actor_pool  # pylint: disable=g-import-not-at-top
+  settings = actor_pool.ACTOR_ENV_VARS
+  if (len(os.sched_getaffinity(0)) == 1
+      and all(os.environ.get(k) == v for k, v in settings.items())):
+    return
+  cpu = sorted(os.sched_getaffinity(0))[-1]
+  os.execvpe("taskset", ["taskset", "-c", str(cpu), sys.executable,
+                         *sys.argv], {**os.environ, **settings})
+
+
 def rollout_breakdown(args):
   """An actor's rollouts, timed piece by piece (see the module doc)."""
   # pylint: disable=g-import-not-at-top
-  from runners import actor_pool
-  # Before JAX starts its backend (its first computation), which reads them.
-  os.environ.update(actor_pool.ACTOR_ENV_VARS)
-  os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[-1]})
   import training_throughput  # Its raw loop (this script's folder).
   from coop_suite.fast import stepping
   from runners import config as config_lib
@@ -224,9 +237,23 @@ def rollout_breakdown(args):
   worker.collect(variables, 0)  # Warm-up: build, compile, fill the caches.
   # pylint: disable=protected-access
   batch, actors = worker._batch, worker._actors
-  raw_envs = [copy.env if spec.uses_commands else copy
-              for copy in batch.envs]
-  recorders = [training_throughput._Controls(env) for env in raw_envs]
+  # The references, apart from the measured copies: the same seeds under
+  # random commands (or joint actions), and one environment under random
+  # joint actions with episodes too long to end.
+  commanded = rollout.EnvBatch(spec, config, worker._seeds,
+                               global_state=False)
+  joint = coop_suite.load(spec.task, spec.n_agents, seed=0, **{
+      **dict(spec.options), "time_limit": training_throughput.LONG_EPISODE})
+  joint.reset()
+
+  def raw_envs(envs):
+    return [copy.env if spec.uses_commands else copy for copy in envs]
+  recorders = {
+      "own": [training_throughput._Controls(env)
+              for env in raw_envs(batch.envs)],
+      "random commands": [training_throughput._Controls(env)
+                          for env in raw_envs(commanded.envs)],
+      "random joint actions": [training_throughput._Controls(joint)]}
   totals = collections.defaultdict(float)
   _time_physics(stepping, totals)
   if batch._controller is not None:
@@ -235,7 +262,7 @@ def rollout_breakdown(args):
   batch._physics.step_physics = _timed(batch._physics.step_physics, totals,
                                        "physics phase")
   batch._compute_rows = _timed(batch._compute_rows, totals, "policy rows")
-  for copy, env in zip(batch.envs, raw_envs):
+  for copy, env in zip(batch.envs, raw_envs(batch.envs)):
     if spec.uses_commands:
       copy.controller_input = _timed(copy.controller_input, totals,
                                      "lower-layer input")
@@ -246,47 +273,58 @@ def rollout_breakdown(args):
       setattr(actor, name, _timed(getattr(actor, name), totals,
                                   "upper and middle layers"))
   # pylint: enable=protected-access
-  substeps = raw_envs[0].task.physics_steps_per_control_step
+  substeps = joint.task.physics_steps_per_control_step
   rng = np.random.default_rng(0)
+
+  def random_commands():
+    for _ in range(config.sequence_length):
+      commanded.step({s.name: rng.uniform(
+          *(s.action_bounds or (-1.0, 1.0)),
+          (len(commanded.rows[s.name][0]), s.action_size))
+                      for s in commanded.species})
+
+  def random_joint_actions():
+    for action in rng.uniform(-1, 1, (400, joint.n_agents, 8)):
+      joint.step(action)
+  random_commands()  # Warm-up.
+  random_joint_actions()
   out = collections.defaultdict(list)
   timed = collections.defaultdict(float)
-  total = steps = episodes = 0
+  total = steps = episodes = checksum = 0
   for r in range(args.rounds):
-    for recorder in recorders:
-      recorder.begin()
-    totals.clear()
-    start = time.perf_counter()
-    result = worker.collect(variables, r + 1)
-    seconds = time.perf_counter() - start
-    for name, value in totals.items():
-      timed[name] += value
-    total += seconds
-    steps += result.env_steps
-    episodes += len(result.episodes)
-    raw = sum(rec.replay_seconds(substeps) for rec in recorders)
-    out["rollout"].append(result.env_steps / seconds)
-    out["raw own"].append(sum(rec.steps for rec in recorders) / raw)
-    out["rollout / raw own"].append(raw / seconds)
-    # The same copies under random commands (or joint actions), replayed.
-    for recorder in recorders:
-      recorder.begin()
-    for _ in range(config.sequence_length):
-      batch.step({s.name: rng.uniform(
-          *(s.action_bounds or (-1.0, 1.0)),
-          (len(batch.rows[s.name][0]), s.action_size))
-                  for s in batch.species})
-    raw = sum(rec.replay_seconds(substeps) for rec in recorders)
-    out["raw random"].append(sum(rec.steps for rec in recorders) / raw)
+    for name, block in (("own", lambda r=r: worker.collect(variables, r + 1)),
+                        ("random commands", random_commands),
+                        ("random joint actions", random_joint_actions)):
+      for recorder in recorders[name]:
+        recorder.begin()
+      totals.clear()
+      start = time.perf_counter()
+      result = block()
+      seconds = time.perf_counter() - start
+      raw = sum(rec.replay_seconds(substeps) for rec in recorders[name])
+      out[name].append(sum(rec.steps for rec in recorders[name]) / raw)
+      if name == "own":
+        for piece, value in totals.items():
+          timed[piece] += value
+        total += seconds
+        steps += result.env_steps
+        episodes += len(result.episodes)
+        checksum += sum(float(np.abs(controls).sum()) for rec in recorders[name]
+                        for _, _, controls in rec.segments)
+        out["rollout"].append(result.env_steps / seconds)
+        out["rollout / raw own"].append(raw / seconds)
   median = {k: float(np.median(v)) for k, v in out.items()}
   print(f"{spec.task} with {spec.n_agents} agents, {what}: {args.rounds} "
         f"rollouts of {args.copies} copies x {config.sequence_length} "
-        f"commands, {episodes} episodes ended (medians over rollouts)")
+        f"commands, {episodes} episodes ended (medians over rounds; the "
+        f"rollouts' controls sum to {checksum:.6g} in absolute value)")
   print(f"  rollout {median['rollout']:,.0f} env steps/s; raw on its own "
-        f"trajectories {median['raw own']:,.0f} control steps/s: rollout / "
-        f"raw {median['rollout / raw own']:.2f}")
-  print(f"  raw on random commands' trajectories {median['raw random']:,.0f}"
-        f" control steps/s: own / random "
-        f"{median['raw own'] / median['raw random']:.2f}")
+        f"trajectories {median['own']:,.0f} control steps/s: rollout / raw "
+        f"{median['rollout / raw own']:.2f}")
+  for name in ("random commands", "random joint actions"):
+    print(f"  raw on {name}' trajectories {median[name]:,.0f} control "
+          f"steps/s: own / that {median['own'] / median[name]:.2f}, "
+          f"rollout / that {median['rollout'] / median[name]:.2f}")
   timed["physics phase"] -= timed["physics substeps"]
   print(f"  one control step of one copy = 1.00 ({total / steps * 1e6:.0f} "
         f"us)")
@@ -295,6 +333,8 @@ def rollout_breakdown(args):
     print(f"    {label:30s} {timed[name] / total:5.2f}")
   rest = 1 - sum(timed.values()) / total
   print(f"    {'rest (batch, timers)':30s} {rest:5.2f}")
+  commanded.close()
+  joint.close()
 
 
 if __name__ == "__main__":
