@@ -36,6 +36,11 @@ rate; the pipeline's trajectories are its policy's, not the replayed ones.
 (the scaling curve, on a machine with that many cores; the one-core raw
 rate stays the reference).
 
+A raw rate belongs to its trajectory: MuJoCo's cost per step moves with it
+(a trained transport policy's trajectories replay ~1.4x slower
+than random commands'; `step_breakdown.py --rollout` measures a policy's,
+docs/performance.md "Inside an actor's rollout").
+
 The one-core loops run in a child process pinned to one CPU with the
 actors' single-threaded settings (`actor_pool.ACTOR_ENV_VARS`); the
 pipelines are `coop-train`'s own loop (`learner_loop.train`, Ray actors)
