@@ -104,8 +104,10 @@ def _ours(summary, metric='success') -> list[str]:
             f'0/{summary["declared"]}', '']
   scale = 100 if metric == 'success' else 1
   spread = summary[f'{metric}_spread'] * scale
-  steps = '/'.join(' + '.join(_steps(s) if s >= 0 else '?' for s in model)
-                   for model in summary['env_steps'])
+  # Each distinct figure once: runs end a few steps past their budget.
+  steps = '/'.join(dict.fromkeys(
+      ' + '.join(_steps(s) if s >= 0 else '?' for s in model)
+      for model in summary['env_steps']))
   return [_rate(summary[metric] * scale, summary[f'{metric}_se'] * scale)
           if metric == 'success' else
           f'{summary[metric]:.0f} +- {summary[f"{metric}_se"]:.0f}',

@@ -773,6 +773,12 @@ def test_report_rebuilds_the_tables_from_committed_results(tmp_path, capsys,
   _commit(pushers, args, {2: [1, 1, 1, 0]}, env_steps=10_000_000)
   assert ('| ravine | HRL | pushers | 2 pushers (2 markers) | 75.0% +- 25.0 '
           '|  | 1/5 | 10M |') in paper_report.report(args)
+  # Runs end a few steps past their budget: the same figure is given once.
+  _commit(next(c for c in paper_plan.PLAN if c.stage == 'pushers'
+               and c.agent == pushers.agent and c.seed == pushers.seed + 1),
+          args, {2: [1, 1, 1, 1]}, env_steps=10_001_024)
+  assert ('| ravine | HRL | pushers | 2 pushers (2 markers) | 87.5% +- 12.5 '
+          '| +- 12.5 | 2/5 | 10M |') in paper_report.report(args)
 
 
 def test_eval_json_follows_marl_eval_layout(tiny_run, tmp_path, capsys):
