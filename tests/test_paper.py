@@ -431,15 +431,19 @@ def _plan_cells(*paths):
 
 class _FakeCellProcess:
   """A cell's process as `paper.run_concurrently` sees it: a child that
-  sleeps `seconds` and exits with `status` (143 on SIGTERM)."""
+  sleeps `seconds` (or until the file `until` exists, if sooner) and exits
+  with `status` (143 on SIGTERM)."""
 
-  def __init__(self, seconds, status=0):
+  def __init__(self, seconds, status=0, until=None):
     self._child = subprocess.Popen([sys.executable, '-c', (
-        'import signal, sys, time\n'
+        'import os, signal, sys, time\n'
         'signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))\n'
         'print("ready", flush=True)\n'
-        f'time.sleep({seconds})\nsys.exit({status})')],
-                                   stdout=subprocess.PIPE, text=True)
+        f'end = time.monotonic() + {seconds}\n'
+        f'while time.monotonic() < end and not ({until!r} and '
+        f'os.path.exists({until!r})):\n'
+        '  time.sleep(0.01)\n'
+        f'sys.exit({status})')], stdout=subprocess.PIPE, text=True)
     assert self._child.stdout.readline() == 'ready\n'  # Its handler is in.
     self.pid = self._child.pid
 
@@ -454,7 +458,9 @@ def test_concurrent_cells_fill_their_slots_and_wait_for_their_stages(
   pushers, crossers, joint, corridor = cells = _plan_cells(
       'ravine/hrl/pushers/n2/s1', 'ravine/hrl/crossers/n2/s1',
       'ravine/hrl/n2/s1', 'corridor/hrl/n4/s1')
-  seconds = {pushers: 0.3, crossers: 1.0, joint: 0.1, corridor: 0.2}
+  # The crossers outlast the pushers by far: on a busy machine too, the
+  # corridor takes the pushers' slot before the joint cell can start.
+  seconds = {pushers: 0.3, crossers: 3.0, joint: 0.1, corridor: 0.2}
   args = _args(tmp_path, concurrent=2)
   started, lines = {}, []
 
@@ -592,11 +598,21 @@ def test_concurrent_cells_stop_together(tmp_path, monkeypatch):
   clock = {'now': 0.0}
   monkeypatch.setattr(run_dir, 'clock', lambda: clock['now'])
 
+  # The cells' processes stash themselves only once the loop has seen the
+  # deadline (a busy machine may take longer to start the second than a
+  # fixed sleep would give the first).
+  seen = str(tmp_path / 'deadline_seen')
+
   def start(cell, own, deadline):
     assert deadline == 3600.0
     clock['now'] = 4000.0
-    return _FakeCellProcess(0.2, paper.EXIT_OUT_OF_TIME)
-  assert paper.run_concurrently(args, cells, lines.append, 3600.0,
+    return _FakeCellProcess(30, paper.EXIT_OUT_OF_TIME, until=seen)
+
+  def log(line):
+    lines.append(line)
+    if line.startswith('Out of time'):
+      open(seen, 'w').close()
+  assert paper.run_concurrently(args, cells, log, 3600.0,
                                 start=start) == run_dir.DEADLINE
   assert lines == [f'{first.path}: starts in a process of its own',
                    f'{second.path}: starts in a process of its own',
