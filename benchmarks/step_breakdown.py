@@ -154,18 +154,7 @@ def lockstep(args):
   batch = lockstep_batch(args.task, args.n_agents, args.copies)
   (species,) = batch.species  # Every agent commanded alike.
   totals = collections.defaultdict(float)
-  # The substeps and the (frozen) controller by class, the physics phase of
-  # all copies at once, the rest per copy.
-  _time_physics(stepping, totals)
-  controller = type(batch.envs[0].controller)
-  controller.act = _timed(controller.act, totals, "lower-layer call")
-  physics = batch._physics  # pylint: disable=protected-access
-  physics.step_physics = _timed(physics.step_physics, totals, "physics phase")
-  for copy in batch.envs:
-    copy.controller_input = _timed(copy.controller_input, totals,
-                                   "lower-layer input")
-    copy.env.step_outcome = _timed(copy.env.step_outcome, totals,
-                                   "outcome phase")
+  _time_lockstep(batch, stepping, totals)
   low_level = batch.envs[0].low_level_steps
   commands = np.random.RandomState(0).uniform(
       -3, 3, (max(1, args.steps // low_level), args.copies * args.n_agents,
@@ -177,23 +166,53 @@ def lockstep(args):
   for command in commands:
     batch.step({species.name: command})
   total = time.perf_counter() - start
-  totals["physics phase"] -= totals["physics substeps"]
   steps = len(commands) * low_level * args.copies
   print(f"{args.task} with {args.n_agents} agents, {args.copies} copies in "
         f"lockstep with the lower layer: one control step of one copy = "
         f"1.00 ({total / steps * 1e6:.0f} us)")
-  for name in ("physics substeps", "physics phase", "lower-layer input",
-               "lower-layer call", "outcome phase"):
+  _print_shares(totals, total, _LOCKSTEP_PIECES, "rest (commands, rows)",
+                "  ")
+
+
+_LOCKSTEP_PIECES = ("physics substeps", "physics phase", "lower-layer input",
+                    "lower-layer call", "outcome phase")
+
+
+def _time_lockstep(batch, stepping, totals):
+  """Times `batch`'s (an `EnvBatch`) lockstep pieces into `totals`: the
+  substeps and the (frozen) controller by class, the physics phase of all
+  copies at once, the lower layer's input and the outcome phase per copy
+  (the input only where the copies are commanded)."""
+  # pylint: disable=protected-access
+  commanded = batch._controller is not None
+  _time_physics(stepping, totals)
+  if commanded:
+    controller = type(batch._controller)
+    controller.act = _timed(controller.act, totals, "lower-layer call")
+  batch._physics.step_physics = _timed(batch._physics.step_physics, totals,
+                                       "physics phase")
+  for copy in batch.envs:
+    if commanded:
+      copy.controller_input = _timed(copy.controller_input, totals,
+                                     "lower-layer input")
+    env = copy.env if commanded else copy
+    env.step_outcome = _timed(env.step_outcome, totals, "outcome phase")
+  # pylint: enable=protected-access
+
+
+def _print_shares(totals, total, pieces, rest, indent):
+  """Each piece's share of `total` seconds, then the rest's. The physics
+  phase's timer holds the substeps' too: it is shown without them."""
+  substeps = totals["physics substeps"]
+  for name in pieces:
+    seconds = totals[name] - (substeps if name == "physics phase" else 0.0)
     label = name + (" (the rest)" if name == "physics phase" else "")
-    print(f"  {label:30s} {totals[name] / total:5.2f}")
-  rest = 1 - sum(totals.values()) / total
-  print(f"  {'rest (commands, rows)':30s} {rest:5.2f}")
+    print(f"{indent}{label:30s} {seconds / total:5.2f}")
+  timed = sum(totals.values()) - substeps
+  print(f"{indent}{rest:30s} {1 - timed / total:5.2f}")
 
 
-_ROLLOUT_PIECES = (
-    "physics substeps", "physics phase", "lower-layer input",
-    "lower-layer call", "outcome phase", "episode resets", "policy rows",
-    "upper and middle layers")
+_ROLLOUT_PIECES = ("episode resets", "policy rows", "upper and middle layers")
 
 
 def _pinned_with_actor_settings():
@@ -255,18 +274,9 @@ def rollout_breakdown(args):
                           for env in raw_envs(commanded.envs)],
       "random joint actions": [training_throughput._Controls(joint)]}
   totals = collections.defaultdict(float)
-  _time_physics(stepping, totals)
-  if batch._controller is not None:
-    controller = type(batch._controller)
-    controller.act = _timed(controller.act, totals, "lower-layer call")
-  batch._physics.step_physics = _timed(batch._physics.step_physics, totals,
-                                       "physics phase")
+  _time_lockstep(batch, stepping, totals)
   batch._compute_rows = _timed(batch._compute_rows, totals, "policy rows")
-  for copy, env in zip(batch.envs, raw_envs(batch.envs)):
-    if spec.uses_commands:
-      copy.controller_input = _timed(copy.controller_input, totals,
-                                     "lower-layer input")
-    env.step_outcome = _timed(env.step_outcome, totals, "outcome phase")
+  for copy in batch.envs:
     copy.reset = _timed(copy.reset, totals, "episode resets")
   for actor in actors.values():
     for name in ("select_action", "observe", "take_rollout"):
@@ -325,14 +335,10 @@ def rollout_breakdown(args):
     print(f"  raw on {name}' trajectories {median[name]:,.0f} control "
           f"steps/s: own / that {median['own'] / median[name]:.2f}, "
           f"rollout / that {median['rollout'] / median[name]:.2f}")
-  timed["physics phase"] -= timed["physics substeps"]
   print(f"  one control step of one copy = 1.00 ({total / steps * 1e6:.0f} "
         f"us)")
-  for name in _ROLLOUT_PIECES:
-    label = name + (" (the rest)" if name == "physics phase" else "")
-    print(f"    {label:30s} {timed[name] / total:5.2f}")
-  rest = 1 - sum(timed.values()) / total
-  print(f"    {'rest (batch, timers)':30s} {rest:5.2f}")
+  _print_shares(timed, total, _LOCKSTEP_PIECES + _ROLLOUT_PIECES,
+                "rest (batch, timers)", "    ")
   commanded.close()
   joint.close()
 
