@@ -2,13 +2,15 @@
 
 One checkpoint is one orbax step, `<logdir>/checkpoints/<update>/`:
 
-  learners/   {species name: that species' saved learner state} (a PyTree
-              item: params, optimiser, normalisers, update counter, PRNG
-              key; `Learner.save()`)
+  learners/   {species name: {dtype name: one flat array}}: that species'
+              saved learner state (params, optimiser, normalisers, update
+              counter, PRNG key; `Learner.save()`) packed into one array
+              per dtype (`_pack`)
   state/      a JSON item: counters (update, env_steps, episodes,
               wall_time, restarts), the run's `TrainArgs`, the agent's
               `HierarchyConfig`, the species layout, the episode window and
-              each learner's kind and format
+              each learner's kind, format and packing layout (each array's
+              path in the state, dtype and shape, in packing order)
   metrics/    on the updates saved as a new best: the episode window's
               success and return
 
@@ -36,6 +38,14 @@ something else (a full disk, a copy cut short) is named and passed over for
 the one before it. `coop-eval --checkpoint <logdir>/checkpoints/best` reads
 the best one.
 
+Why packed: orbax spends about half a millisecond of Python per array it
+writes (metadata, TensorStore specs), and the ravine's two learners hold ~250
+arrays: ~120-140 ms of CPU a checkpoint unpacked, ~35 ms packed (measured on the
+2-core machine; `benchmarks/checkpoint_cost.py`), at one checkpoint an
+update of a few seconds. Checkpoints of format 2 and 3 (each learner's
+state as orbax's own PyTree, arrays of no elements left out) read as
+before.
+
 Runs from before orbax (`checkpoints/ckpt_<update>/` and `checkpoints/
 best/`, each with a `<species>.msgpack` per learner and `state.json`) read as
 before and resume; the resumed run writes orbax steps beside them, and the
@@ -55,8 +65,10 @@ import numpy as np
 
 from runners import run_dir
 
-FORMAT = 3
-"""The layout of the state item (1: the `state.json` of runs before orbax)."""
+FORMAT = 4
+"""The checkpoint's layout (1: the `state.json` of runs before orbax; 2 and
+3: the learners as orbax PyTrees, 2 with its counter named 'iteration'; 4:
+the learners packed, `_pack`)."""
 BEST = 'best'
 STATE_FILE = 'state.json'  # Runs before orbax.
 _LEGACY_PREFIX = 'ckpt_'
@@ -217,14 +229,13 @@ def _write(manager, saved: Mapping[str, dict[str, Any]],
            score: Optional[tuple[float, float]] = None) -> None:
   """Writes {species: saved learner state} and `state` as the orbax step
   `state['update']` of `manager` (a writer `_manager`)."""
-  import jax  # pylint: disable=g-import-not-at-top
   import orbax.checkpoint as ocp  # pylint: disable=g-import-not-at-top
-  # Orbax stores no zero-size arrays; `checkpointing.from_state_dict` puts
-  # them back from the learner's own state.
-  arrays = {name: jax.tree.map(lambda a: None if np.size(a) == 0 else a,
-                               s['state']) for name, s in saved.items()}
+  arrays, layouts = {}, {}
+  for name, s in saved.items():
+    arrays[name], layouts[name] = _pack(s['state'])
   state = {**state, 'format': FORMAT, 'learners': {
-      name: {'kind': s['kind'], 'format': s['format']}
+      name: {'kind': s['kind'], 'format': s['format'],
+             'layout': layouts[name]}
       for name, s in saved.items()}}
   metrics = None
   if score is not None:
@@ -234,6 +245,61 @@ def _write(manager, saved: Mapping[str, dict[str, Any]],
     manager.save(update, metrics=metrics, force=True,
                  args=ocp.args.Composite(learners=ocp.args.PyTreeSave(arrays),
                                          state=ocp.args.JsonSave(state)))
+
+
+def _pack(state_dict: dict[str, Any]
+          ) -> tuple[dict[str, np.ndarray], list[list[Any]]]:
+  """A learner's saved state dict as one flat array per dtype, and the
+  layout that `_unpack` reads it back with: [path, dtype name, shape] per
+  array in packing order ([path, None, None] for an empty dict). A dtype
+  whose arrays have no elements at all gets no array (orbax stores none)."""
+  from flax import traverse_util  # pylint: disable=g-import-not-at-top
+  flat = traverse_util.flatten_dict(state_dict, keep_empty_nodes=True)
+  parts, layout = {}, []
+  for path, leaf in flat.items():
+    if leaf is traverse_util.empty_node:
+      layout.append([list(path), None, None])
+      continue
+    leaf = np.asarray(leaf)
+    parts.setdefault(leaf.dtype.name, []).append(leaf.reshape(-1))
+    layout.append([list(path), leaf.dtype.name, list(leaf.shape)])
+  arrays = {dtype: np.concatenate(p) for dtype, p in parts.items()}
+  return {dtype: a for dtype, a in arrays.items() if a.size}, layout
+
+
+def _unpack(arrays: Mapping[str, np.ndarray], layout: list[list[Any]],
+            source: str) -> dict[str, Any]:
+  """The saved state dict that `_pack` packed into `arrays` with `layout`.
+
+  Raises:
+    CorruptCheckpoint: the arrays do not hold what the layout says.
+  """
+  from flax import traverse_util  # pylint: disable=g-import-not-at-top
+  flat, used = {}, {}
+  try:
+    for path, dtype, shape in layout:
+      if dtype is None:
+        flat[tuple(path)] = traverse_util.empty_node
+        continue
+      packed = arrays.get(dtype)
+      if packed is None:
+        packed = np.zeros(0, dtype)
+      start = used.get(dtype, 0)
+      used[dtype] = start + int(np.prod(shape, dtype=np.int64))
+      if used[dtype] > np.size(packed) or np.dtype(packed.dtype) != dtype:
+        raise CorruptCheckpoint(f'{source} does not hold the {dtype} values '
+                                'its layout says.')
+      flat[tuple(path)] = packed[start:used[dtype]].reshape(shape)
+  except (TypeError, ValueError) as e:  # A layout of another form.
+    if isinstance(e, CorruptCheckpoint):
+      raise
+    raise CorruptCheckpoint(f'{source} has an unreadable layout ({e}).'
+                            ) from None
+  extra = [d for d, a in arrays.items() if used.get(d, 0) != np.size(a)]
+  if extra:
+    raise CorruptCheckpoint(f'{source} holds {extra} values its layout '
+                            'does not place.')
+  return traverse_util.unflatten_dict(flat)
 
 
 def discard_after(logdir: str, update: int) -> None:
@@ -344,15 +410,22 @@ def _read(checkpoint: str, items=_ITEMS) -> dict[str, Any]:
   state = read['state']
   if not isinstance(state, dict):
     raise CorruptCheckpoint(f'{checkpoint} holds no checkpoint state.')
-  if state.get('format') not in (2, FORMAT):
+  if state.get('format') not in (2, 3, FORMAT):
     raise ValueError(f'{checkpoint} has checkpoint format '
-                     f'{state.get("format")}, expected 2 or {FORMAT}.')
+                     f'{state.get("format")}, expected 2 to {FORMAT}.')
   state = _upgrade(state)
-  missing = [n for n in state.get('learners', {})
-             if 'learners' in items and n not in read['learners']]
+  if 'learners' not in items:
+    return {'state': state}
+  learners = state.get('learners', {})
+  missing = [n for n in learners if n not in read['learners']]
   if missing:
     raise CorruptCheckpoint(f'{checkpoint} holds no learner for {missing}.')
-  return {item: state if item == 'state' else read[item] for item in items}
+  saved = read['learners']
+  if state['format'] == FORMAT:
+    saved = {name: _unpack(saved[name], entry.get('layout', []),
+                           f'{checkpoint} ({name})')
+             for name, entry in learners.items()}
+  return {'state': state, 'learners': saved}
 
 
 def read_state(checkpoint: str) -> dict[str, Any]:
@@ -398,7 +471,8 @@ def saved_learner(checkpoint: str, species: str) -> dict[str, Any]:
 
 def _saved_learner(read: dict[str, Any], species: str) -> dict[str, Any]:
   """One species' saved learner state from a `_read` orbax step."""
-  return {**read['state']['learners'][species],
+  entry = read['state']['learners'][species]
+  return {'kind': entry['kind'], 'format': entry['format'],
           'state': read['learners'][species]}
 
 
@@ -447,7 +521,9 @@ def _remove_legacy(logdir: str, keep: int, best: bool) -> None:
   what their writers left when killed (`.tmp-<pid>`, once it is dead)."""
   run_dir.remove_stale(_directory(logdir))
   old = set(_legacy_checkpoints(logdir))
-  for path in list_checkpoints(logdir)[:-keep]:
+  # Listing the orbax steps opens a manager (milliseconds at every save):
+  # only a run that has old checkpoints needs it.
+  for path in list_checkpoints(logdir)[:-keep] if old else ():
     if path in old:
       shutil.rmtree(path)
   if best:

@@ -343,6 +343,80 @@ def test_a_format_2_checkpoint_reads_with_its_counter_named_update():
   assert state['env_steps'] == on_disk['env_steps']
 
 
+class _NestedLearner:
+  """A saved state with what a real learner's holds: nested dicts, three
+  dtypes, a scalar, an array without elements and an empty dict (optax's
+  empty states)."""
+
+  def __init__(self, value):
+    self.state = {
+        'params': {'dense': {'kernel': np.arange(6, dtype=np.float32)
+                             .reshape(2, 3) * value,
+                             'bias': np.full(3, value, np.float32)}},
+        'opt_state': {'0': {'count': np.array(7, np.int32)}, '1': {}},
+        'key': np.array([1, 2 ** 32 - 1], np.uint32),
+        'empty': np.zeros((0, 4), np.float32),
+        'steps': np.array(-3, np.int32)}
+
+  def save(self):
+    return {'format': 1, 'kind': 'fake', 'state': self.state}
+
+
+def _orbax_items(checkpoint):
+  import orbax.checkpoint as ocp  # pylint: disable=g-import-not-at-top
+  with ocp.Checkpointer(ocp.CompositeCheckpointHandler()) as checkpointer:
+    return checkpointer.restore(checkpoint, args=ocp.args.Composite(
+        learners=ocp.args.PyTreeRestore(), state=ocp.args.JsonRestore()))
+
+
+def test_learners_are_packed_one_array_per_dtype_and_read_back_whole(
+    tmp_path):
+  """Orbax costs Python per array written, so each species' state is one
+  array per dtype on disk (`checkpoints._pack`); it reads back as it was
+  saved: structure, dtypes, shapes and values."""
+  learner = _NestedLearner(1.5)
+  path = checkpoints.save(str(tmp_path), {'ant': learner}, _state(4), 3)
+  on_disk = _orbax_items(path)
+  assert sorted(on_disk['learners']['ant']) == ['float32', 'int32',
+                                                'uint32']
+  assert on_disk['learners']['ant']['float32'].shape == (9,)
+  assert on_disk['state']['format'] == checkpoints.FORMAT == 4
+  saved = checkpoints.saved_learner(path, 'ant')
+  assert sorted(saved) == ['format', 'kind', 'state']
+  flat_back = jax.tree_util.tree_flatten_with_path(saved['state'])[0]
+  flat_ours = jax.tree_util.tree_flatten_with_path(learner.state)[0]
+  assert [k for k, _ in flat_back] == [k for k, _ in flat_ours]
+  for (_, back), (_, ours) in zip(flat_back, flat_ours):
+    assert back.dtype == ours.dtype and back.shape == ours.shape
+    np.testing.assert_array_equal(back, ours)
+  assert saved['state']['opt_state']['1'] == {}
+  # A layout that does not match the arrays is a damaged checkpoint.
+  metadata = os.path.join(path, 'state', 'metadata')
+  with open(metadata) as f:
+    state = json.load(f)
+  state['learners']['ant']['layout'][0][2] = [3, 3]
+  with open(metadata, 'w') as f:
+    json.dump(state, f)
+  with pytest.raises(checkpoints.CorruptCheckpoint, match='layout'):
+    checkpoints.check_complete(path)
+
+
+def test_a_format_3_checkpoint_reads_as_orbax_wrote_it():
+  """Checkpoints from before the packing (the published results, the
+  committed stashes) read their learners as orbax's PyTree."""
+  published = os.path.join(REPO, 'results', 'paper', 'transport_hrl_n4_s0',
+                           'checkpoints', '1172')
+  on_disk = _orbax_items(published)
+  assert on_disk['state']['format'] == 3
+  saved = checkpoints.saved_learner(published, 'ant')
+  back = jax.tree_util.tree_flatten_with_path(saved['state'])[0]
+  ours = jax.tree_util.tree_flatten_with_path(on_disk['learners']['ant'])[0]
+  assert len(back) == len(ours) > 10
+  for (path_back, a), (path_ours, b) in zip(back, ours):
+    assert path_back == path_ours
+    np.testing.assert_array_equal(a, b)
+
+
 def _to_old_layout(checkpoint, learners):
   """`checkpoint` as a run from before orbax wrote it:
   `ckpt_<iteration>/` with `<species>.msgpack` (what `learner.save(path)`
