@@ -53,7 +53,8 @@ def unpack(saved: dict[str, Any], kind: str, source: str
 
 def _with_empty_arrays(template: Any, state_dict: Any) -> Any:
   """`state_dict` with None where `template` has a zero-size array put back
-  as that array (orbax does not store arrays without elements)."""
+  as that array (checkpoints of format 2-3, and policies published from
+  them, hold None there: orbax stores no arrays without elements)."""
   if isinstance(state_dict, dict) and isinstance(template, dict):
     return {k: _with_empty_arrays(template.get(k), v)
             for k, v in state_dict.items()}

@@ -6,15 +6,21 @@ A run writes one checkpoint an update (`--checkpoint-every 1`), finishing
 in the background while the next rollouts are collected, so its CPU time
 is taken from the actors. This builds a task's fresh learners (the ravine's
 joint task: two species), then writes checkpoints of their whole state
-(`Learner.save()`) two ways that alternate, `--saves` each, with a pause
-between saves where a run would collect: `runners.checkpoints.Writer` (the
-learners packed into one array per dtype, what runs write) and orbax's
-own PyTree of the same state dicts through the same kind of manager (what
-runs wrote before, format 3). Prints the process's CPU time per save (the
-writing threads included) and the driver's wall time per save beyond the
-pauses, and the ratio unpacked / packed. Both checkpoints are read back
-and compared. CPU times are the machine's: run it idle for absolute
-figures; the ratio is measured in one run.
+(`Learner.save()`) two ways that alternate, `--saves` each after two
+rounds of warm-up, with a pause between saves where a run would collect:
+`runners.checkpoints.Writer` (the learners packed, `runners.packing`: what
+runs write) and, as a stand-in for the format-3 writer, orbax's own
+PyTree of the same state dicts (arrays without elements as None, as that
+writer wrote them) through a bare asynchronous `CheckpointManager` (no
+best-checkpoint policy, and not the old writer's listing of the run's
+steps at each save, so it is if anything cheaper than that writer was).
+Prints the number of arrays in the learners' states, the process's CPU
+time per save (the writing threads included, each save waited for before
+the clock is read) and the driver's wall time per save beyond the pause
+(medians), each way's newest checkpoint's size on disk, and the median
+ratio of the CPU times. The packed checkpoint is read back and compared
+with the learners' state. CPU times are the machine's: run it idle for
+absolute figures; the ratio is measured in one run.
 """
 import argparse
 import os

@@ -5,7 +5,7 @@ One checkpoint is one orbax step, `<logdir>/checkpoints/<update>/`:
   learners/   {species name: {dtype name: one flat array}}: that species'
               saved learner state (params, optimiser, normalisers, update
               counter, PRNG key; `Learner.save()`) packed into one array
-              per dtype (`_pack`)
+              per dtype (`runners.packing`)
   state/      a JSON item: counters (update, env_steps, episodes,
               wall_time, restarts), the run's `TrainArgs`, the agent's
               `HierarchyConfig`, the species layout, the episode window and
@@ -38,13 +38,10 @@ something else (a full disk, a copy cut short) is named and passed over for
 the one before it. `coop-eval --checkpoint <logdir>/checkpoints/best` reads
 the best one.
 
-Why packed: orbax spends about half a millisecond of Python per array it
-writes (metadata, TensorStore specs), and the ravine's two learners hold ~250
-arrays: ~120-140 ms of CPU a checkpoint unpacked, ~35 ms packed (measured on the
-2-core machine; `benchmarks/checkpoint_cost.py`), at one checkpoint an
-update of a few seconds. Checkpoints of format 2 and 3 (each learner's
-state as orbax's own PyTree, arrays of no elements left out) read as
-before.
+Packed because orbax's cost is per array written (`runners.packing`), at
+one checkpoint an update of a few seconds. Checkpoints of format 2 and 3
+(each learner's state as orbax's own PyTree, arrays of no elements left
+out) read as before.
 
 Runs from before orbax (`checkpoints/ckpt_<update>/` and `checkpoints/
 best/`, each with a `<species>.msgpack` per learner and `state.json`) read as
@@ -61,14 +58,13 @@ import shutil
 import sys
 from typing import Any, Callable, Mapping, Optional
 
-import numpy as np
-
+from runners import packing
 from runners import run_dir
 
 FORMAT = 4
 """The checkpoint's layout (1: the `state.json` of runs before orbax; 2 and
 3: the learners as orbax PyTrees, 2 with its counter named 'iteration'; 4:
-the learners packed, `_pack`)."""
+the learners packed, `runners.packing`)."""
 BEST = 'best'
 STATE_FILE = 'state.json'  # Runs before orbax.
 _LEGACY_PREFIX = 'ckpt_'
@@ -232,7 +228,7 @@ def _write(manager, saved: Mapping[str, dict[str, Any]],
   import orbax.checkpoint as ocp  # pylint: disable=g-import-not-at-top
   arrays, layouts = {}, {}
   for name, s in saved.items():
-    arrays[name], layouts[name] = _pack(s['state'])
+    arrays[name], layouts[name] = packing.pack(s['state'])
   state = {**state, 'format': FORMAT, 'learners': {
       name: {'kind': s['kind'], 'format': s['format'],
              'layout': layouts[name]}
@@ -245,61 +241,6 @@ def _write(manager, saved: Mapping[str, dict[str, Any]],
     manager.save(update, metrics=metrics, force=True,
                  args=ocp.args.Composite(learners=ocp.args.PyTreeSave(arrays),
                                          state=ocp.args.JsonSave(state)))
-
-
-def _pack(state_dict: dict[str, Any]
-          ) -> tuple[dict[str, np.ndarray], list[list[Any]]]:
-  """A learner's saved state dict as one flat array per dtype, and the
-  layout that `_unpack` reads it back with: [path, dtype name, shape] per
-  array in packing order ([path, None, None] for an empty dict). A dtype
-  whose arrays have no elements at all gets no array (orbax stores none)."""
-  from flax import traverse_util  # pylint: disable=g-import-not-at-top
-  flat = traverse_util.flatten_dict(state_dict, keep_empty_nodes=True)
-  parts, layout = {}, []
-  for path, leaf in flat.items():
-    if leaf is traverse_util.empty_node:
-      layout.append([list(path), None, None])
-      continue
-    leaf = np.asarray(leaf)
-    parts.setdefault(leaf.dtype.name, []).append(leaf.reshape(-1))
-    layout.append([list(path), leaf.dtype.name, list(leaf.shape)])
-  arrays = {dtype: np.concatenate(p) for dtype, p in parts.items()}
-  return {dtype: a for dtype, a in arrays.items() if a.size}, layout
-
-
-def _unpack(arrays: Mapping[str, np.ndarray], layout: list[list[Any]],
-            source: str) -> dict[str, Any]:
-  """The saved state dict that `_pack` packed into `arrays` with `layout`.
-
-  Raises:
-    CorruptCheckpoint: the arrays do not hold what the layout says.
-  """
-  from flax import traverse_util  # pylint: disable=g-import-not-at-top
-  flat, used = {}, {}
-  try:
-    for path, dtype, shape in layout:
-      if dtype is None:
-        flat[tuple(path)] = traverse_util.empty_node
-        continue
-      packed = arrays.get(dtype)
-      if packed is None:
-        packed = np.zeros(0, dtype)
-      start = used.get(dtype, 0)
-      used[dtype] = start + int(np.prod(shape, dtype=np.int64))
-      if used[dtype] > np.size(packed) or np.dtype(packed.dtype) != dtype:
-        raise CorruptCheckpoint(f'{source} does not hold the {dtype} values '
-                                'its layout says.')
-      flat[tuple(path)] = packed[start:used[dtype]].reshape(shape)
-  except (TypeError, ValueError) as e:  # A layout of another form.
-    if isinstance(e, CorruptCheckpoint):
-      raise
-    raise CorruptCheckpoint(f'{source} has an unreadable layout ({e}).'
-                            ) from None
-  extra = [d for d, a in arrays.items() if used.get(d, 0) != np.size(a)]
-  if extra:
-    raise CorruptCheckpoint(f'{source} holds {extra} values its layout '
-                            'does not place.')
-  return traverse_util.unflatten_dict(flat)
 
 
 def discard_after(logdir: str, update: int) -> None:
@@ -422,9 +363,11 @@ def _read(checkpoint: str, items=_ITEMS) -> dict[str, Any]:
     raise CorruptCheckpoint(f'{checkpoint} holds no learner for {missing}.')
   saved = read['learners']
   if state['format'] == FORMAT:
-    saved = {name: _unpack(saved[name], entry.get('layout', []),
-                           f'{checkpoint} ({name})')
-             for name, entry in learners.items()}
+    try:
+      saved = {name: packing.unpack(saved[name], entry['layout'])
+               for name, entry in learners.items()}
+    except (KeyError, TypeError, ValueError) as e:
+      raise CorruptCheckpoint(f'{checkpoint}: {e}.') from None
   return {'state': state, 'learners': saved}
 
 

@@ -346,20 +346,23 @@ def test_a_format_2_checkpoint_reads_with_its_counter_named_update():
 class _NestedLearner:
   """A saved state with what a real learner's holds: nested dicts, three
   dtypes, a scalar, an array without elements and an empty dict (optax's
-  empty states)."""
+  empty states), in today's learner format."""
 
   def __init__(self, value):
     self.state = {
         'params': {'dense': {'kernel': np.arange(6, dtype=np.float32)
                              .reshape(2, 3) * value,
                              'bias': np.full(3, value, np.float32)}},
-        'opt_state': {'0': {'count': np.array(7, np.int32)}, '1': {}},
-        'key': np.array([1, 2 ** 32 - 1], np.uint32),
-        'empty': np.zeros((0, 4), np.float32),
-        'steps': np.array(-3, np.int32)}
+        'normalizer': {'mean': np.full(2, value, np.float32),
+                       'empty': np.zeros((0, 4), np.float32)},
+        'value_normalizer': {'count': np.array(7, np.int32)},
+        'opt_state': {'0': {'count': np.array(-3, np.int32)}, '1': {}},
+        'key': np.array([1, 2 ** 32 - 1], np.uint32)}
 
   def save(self):
-    return {'format': 1, 'kind': 'fake', 'state': self.state}
+    from agents.ppo import learning  # pylint: disable=g-import-not-at-top
+    return {'format': learning.CHECKPOINT_FORMAT, 'kind': 'fake',
+            'state': self.state}
 
 
 def _orbax_items(checkpoint):
@@ -369,52 +372,87 @@ def _orbax_items(checkpoint):
         learners=ocp.args.PyTreeRestore(), state=ocp.args.JsonRestore()))
 
 
+def _assert_same_state(back, ours):
+  flat_back = jax.tree_util.tree_flatten_with_path(back)[0]
+  flat_ours = jax.tree_util.tree_flatten_with_path(ours)[0]
+  assert [k for k, _ in flat_back] == [k for k, _ in flat_ours]
+  for (_, a), (_, b) in zip(flat_back, flat_ours):
+    assert a.dtype == b.dtype and a.shape == b.shape
+    np.testing.assert_array_equal(a, b)
+
+
 def test_learners_are_packed_one_array_per_dtype_and_read_back_whole(
     tmp_path):
   """Orbax costs Python per array written, so each species' state is one
-  array per dtype on disk (`checkpoints._pack`); it reads back as it was
-  saved: structure, dtypes, shapes and values."""
+  array per dtype on disk (`runners.packing`); it reads back as it was
+  saved: structure, dtypes, shapes and values, empty dicts included."""
   learner = _NestedLearner(1.5)
   path = checkpoints.save(str(tmp_path), {'ant': learner}, _state(4), 3)
   on_disk = _orbax_items(path)
   assert sorted(on_disk['learners']['ant']) == ['float32', 'int32',
                                                 'uint32']
-  assert on_disk['learners']['ant']['float32'].shape == (9,)
+  assert on_disk['learners']['ant']['float32'].shape == (11,)
   assert on_disk['state']['format'] == checkpoints.FORMAT == 4
   saved = checkpoints.saved_learner(path, 'ant')
   assert sorted(saved) == ['format', 'kind', 'state']
-  flat_back = jax.tree_util.tree_flatten_with_path(saved['state'])[0]
-  flat_ours = jax.tree_util.tree_flatten_with_path(learner.state)[0]
-  assert [k for k, _ in flat_back] == [k for k, _ in flat_ours]
-  for (_, back), (_, ours) in zip(flat_back, flat_ours):
-    assert back.dtype == ours.dtype and back.shape == ours.shape
-    np.testing.assert_array_equal(back, ours)
+  _assert_same_state(saved['state'], learner.state)
   assert saved['state']['opt_state']['1'] == {}
   # A layout that does not match the arrays is a damaged checkpoint.
   metadata = os.path.join(path, 'state', 'metadata')
   with open(metadata) as f:
     state = json.load(f)
-  state['learners']['ant']['layout'][0][2] = [3, 3]
-  with open(metadata, 'w') as f:
-    json.dump(state, f)
-  with pytest.raises(checkpoints.CorruptCheckpoint, match='layout'):
-    checkpoints.check_complete(path)
+  for layout in ([[['a'], 'float32', [3, 3]]], 'not a layout', None):
+    state['learners']['ant']['layout'] = layout
+    with open(metadata, 'w') as f:
+      json.dump(state, f)
+    with pytest.raises(checkpoints.CorruptCheckpoint, match='layout'):
+      checkpoints.check_complete(path)
+  with pytest.raises(ValueError, match='not an array of numbers'):
+    checkpoints.save(str(tmp_path / 'none'),
+                     {'ant': FakeLearner(1.0)} | {'bee': _TextLearner()},
+                     _state(1), 3)
 
 
-def test_a_format_3_checkpoint_reads_as_orbax_wrote_it():
-  """Checkpoints from before the packing (the published results, the
-  committed stashes) read their learners as orbax's PyTree."""
-  published = os.path.join(REPO, 'results', 'paper', 'transport_hrl_n4_s0',
-                           'checkpoints', '1172')
-  on_disk = _orbax_items(published)
-  assert on_disk['state']['format'] == 3
-  saved = checkpoints.saved_learner(published, 'ant')
-  back = jax.tree_util.tree_flatten_with_path(saved['state'])[0]
-  ours = jax.tree_util.tree_flatten_with_path(on_disk['learners']['ant'])[0]
-  assert len(back) == len(ours) > 10
-  for (path_back, a), (path_ours, b) in zip(back, ours):
-    assert path_back == path_ours
-    np.testing.assert_array_equal(a, b)
+class _TextLearner:
+
+  def save(self):
+    return {'format': 1, 'kind': 'fake', 'state': {'w': 'text'}}
+
+
+def test_a_format_3_checkpoint_reads_and_publishes_packed(tmp_path):
+  """A run checkpoint written before the packing (format 3: orbax's own
+  tree, arrays without elements as None; the stashes of 27 November and
+  before) reads as it did, and its policy is published packed."""
+  import orbax.checkpoint as ocp  # pylint: disable=g-import-not-at-top
+  learner = _NestedLearner(2.0)
+  arrays = {'ant': jax.tree.map(lambda a: None if np.size(a) == 0 else a,
+                                learner.save()['state'])}
+  state = {**_state(5), 'format': 3, 'learners': {'ant': {
+      'kind': 'fake', 'format': learner.save()['format']}}}
+  logdir = str(tmp_path / 'run')
+  with ocp.CheckpointManager(os.path.join(logdir, 'checkpoints'),
+                             options=ocp.CheckpointManagerOptions(
+                                 create=True)) as manager:
+    manager.save(5, args=ocp.args.Composite(
+        learners=ocp.args.PyTreeSave(arrays), state=ocp.args.JsonSave(state)))
+  old = checkpoints.resolve(logdir)
+  assert checkpoints.read_state(old)['format'] == 3
+  back = checkpoints.saved_learner(old, 'ant')['state']
+  assert back['normalizer']['empty'] is None  # As format 3 stored it.
+  _assert_same_state({**back, 'normalizer': {'mean': back['normalizer']
+                                             ['mean']}},
+                     {**learner.state, 'normalizer': {
+                         'mean': learner.state['normalizer']['mean']}})
+  published = checkpoints.write_policy(old, str(tmp_path / 'published'))
+  assert checkpoints.check_complete(published)['format'] == 4
+  policy = checkpoints.saved_learner(published, 'ant')['state']
+  assert sorted(policy) == ['normalizer', 'params', 'value_normalizer']
+  assert policy['normalizer']['empty'] is None  # Carried as read.
+  _assert_same_state(policy['params'], learner.state['params'])
+  # The committed results of format 3 read completely.
+  assert checkpoints.check_complete(os.path.join(
+      REPO, 'results', 'paper', 'transport_hrl_n4_s0', 'checkpoints',
+      '1172'))['format'] == 3
 
 
 def _to_old_layout(checkpoint, learners):
