@@ -363,12 +363,20 @@ def _read(checkpoint: str, items=_ITEMS) -> dict[str, Any]:
     raise CorruptCheckpoint(f'{checkpoint} holds no learner for {missing}.')
   saved = read['learners']
   if state['format'] == FORMAT:
-    try:
-      saved = {name: packing.unpack(saved[name], entry['layout'])
-               for name, entry in learners.items()}
-    except (KeyError, TypeError, ValueError) as e:
-      raise CorruptCheckpoint(f'{checkpoint}: {e}.') from None
+    saved = {name: _unpacked(checkpoint, name, saved[name], entry)
+             for name, entry in learners.items()}
   return {'state': state, 'learners': saved}
+
+
+def _unpacked(checkpoint: str, species: str, arrays: Any,
+              entry: Any) -> dict[str, Any]:
+  """A species' saved state dict from the packed arrays of a format-4
+  checkpoint and its state entry (`runners.packing`)."""
+  try:
+    return packing.unpack(arrays, entry['layout'])
+  except (KeyError, TypeError, ValueError) as e:
+    raise CorruptCheckpoint(f'{checkpoint}: the {species} learner does not '
+                            f'unpack with its layout ({e}).') from None
 
 
 def read_state(checkpoint: str) -> dict[str, Any]:
@@ -415,7 +423,7 @@ def saved_learner(checkpoint: str, species: str) -> dict[str, Any]:
 def _saved_learner(read: dict[str, Any], species: str) -> dict[str, Any]:
   """One species' saved learner state from a `_read` orbax step."""
   entry = read['state']['learners'][species]
-  return {'kind': entry['kind'], 'format': entry['format'],
+  return {**{k: v for k, v in entry.items() if k != 'layout'},
           'state': read['learners'][species]}
 
 
