@@ -69,6 +69,7 @@ BEST = 'best'
 STATE_FILE = 'state.json'  # Runs before orbax.
 _LEGACY_PREFIX = 'ckpt_'
 _ITEMS = ('learners', 'state')
+_CHUNK_BYTES = 2 ** 20  # See `_write`.
 
 
 class CorruptCheckpoint(ValueError):
@@ -237,10 +238,20 @@ def _write(manager, saved: Mapping[str, dict[str, Any]],
   if score is not None:
     metrics = {'success': score[0], 'return': score[1]}
   update = int(state['update'])
+  # Packed, a learner is one large array: chunked, and the chunks spread
+  # over data files of ~2 MiB, no file of a checkpoint passes ~2.5 MB (a
+  # published result or a stash is committed, and the repository takes no
+  # file over 5 MB).
+  save_args = {name: {dtype: ocp.SaveArgs(chunk_byte_size=_CHUNK_BYTES)
+                      for dtype in packed}
+               for name, packed in arrays.items()}
   with _orbax_quiet():
     manager.save(update, metrics=metrics, force=True,
-                 args=ocp.args.Composite(learners=ocp.args.PyTreeSave(arrays),
-                                         state=ocp.args.JsonSave(state)))
+                 args=ocp.args.Composite(
+                     learners=ocp.args.PyTreeSave(
+                         arrays, save_args=save_args,
+                         ocdbt_target_data_file_size=2 * _CHUNK_BYTES),
+                     state=ocp.args.JsonSave(state)))
 
 
 def discard_after(logdir: str, update: int) -> None:

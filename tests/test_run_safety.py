@@ -413,6 +413,29 @@ def test_learners_are_packed_one_array_per_dtype_and_read_back_whole(
                      _state(1), 3)
 
 
+class _BigLearner:
+
+  def save(self):
+    rng = np.random.default_rng(0)  # Random: orbax compresses.
+    return {'format': 1, 'kind': 'fake',
+            'state': {'w': rng.random(2 ** 21, np.float32),
+                      'v': rng.random(2 ** 19, np.float32)}}
+
+
+def test_no_file_of_a_checkpoint_passes_three_megabytes(tmp_path):
+  """Published results and stashes are committed (no file over 5 MB): a
+  learner of 10 MB of float32, packed into one array, spreads over files
+  of ~2.5 MB at most."""
+  path = checkpoints.save(str(tmp_path), {'ant': _BigLearner()},
+                          _state(1), 3)
+  sizes = [os.path.getsize(os.path.join(d, f))
+           for d, _, files in os.walk(path) for f in files]
+  assert sum(sizes) > 8e6 and max(sizes) < 3e6, sorted(sizes)[-4:]
+  np.testing.assert_array_equal(
+      checkpoints.saved_learner(path, 'ant')['state']['w'],
+      _BigLearner().save()['state']['w'])
+
+
 class _TextLearner:
 
   def save(self):
