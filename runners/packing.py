@@ -4,7 +4,7 @@
 a nested dict of host arrays, ~127 of them for a hierarchy learner) packed,
 because orbax's cost is Python per array written (metadata, TensorStore
 specs): ~0.5 ms an array, so a ravine checkpoint of two learners costs
-~120-140 ms of CPU as orbax's own tree and ~35 ms packed
+~120-140 ms of CPU as orbax's own tree and ~30-35 ms packed
 (docs/performance.md, "Checkpoints packed"). The layout that unpacks it is
 JSON (it goes into the checkpoint's state item): one [path, dtype name,
 shape] per array in packing order, [path, '{}', None] for an empty dict and
