@@ -483,11 +483,10 @@ def _remove_legacy(logdir: str, keep: int, best: bool) -> None:
   what their writers left when killed (`.tmp-<pid>`, once it is dead)."""
   run_dir.remove_stale(_directory(logdir))
   old = set(_legacy_checkpoints(logdir))
-  # Listing the orbax steps opens a manager (milliseconds at every save):
-  # only a run that has old checkpoints needs it.
-  for path in list_checkpoints(logdir)[:-keep] if old else ():
-    if path in old:
-      shutil.rmtree(path)
+  if old:  # Listing the orbax steps opens a manager: ms at every save.
+    for path in list_checkpoints(logdir)[:-keep]:
+      if path in old:
+        shutil.rmtree(path)
   if best:
     shutil.rmtree(os.path.join(_directory(logdir), BEST), ignore_errors=True)
 
