@@ -72,8 +72,8 @@ class PaperArgs:
   """Environment steps per cell instead of the plan's (quick runs); 0 keeps
   the plan's."""
   dry_run: bool = False
-  """Print the plan with each cell's status and estimated wall time; run
-  nothing."""
+  """Print the plan with each cell's status and estimated wall time (and
+  the pace of the cells running now); run nothing."""
   report: bool = False
   """Print the tables built from the committed results; run nothing."""
   docs: str = ''
@@ -301,12 +301,45 @@ def selected(args: PaperArgs, plan=None) -> list[paper_plan.Cell]:
   return cells
 
 
+PACE_WINDOW = 600.0
+"""Seconds of a running cell's latest updates that `measured_pace` takes its
+rate over (metrics.csv's `wall_time`); a metrics.csv not written for this
+long is not taken as running."""
+
+
+def measured_pace(cell: paper_plan.Cell, args: PaperArgs
+                  ) -> Optional[float]:
+  """The env steps/s of the running `cell` over its last `PACE_WINDOW`
+  seconds of updates (its run directory's metrics.csv: env steps over the
+  updates' wall time, which leaves out the ~1-2% between updates), or None
+  without a fresh metrics.csv holding 3 rows in that window."""
+  from runners import plot  # pylint: disable=g-import-not-at-top
+  logdir = run_directory(cell, args)
+  try:
+    if time.time() - os.path.getmtime(os.path.join(logdir, 'metrics.csv')
+                                      ) > PACE_WINDOW:
+      return None
+    rows = plot.read_metrics(logdir)
+  except (OSError, ValueError):
+    return None
+  rows = [r for r in rows if 'env_steps' in r and 'wall_time' in r]
+  window = [r for r in rows
+            if rows[-1]['wall_time'] - r['wall_time'] <= PACE_WINDOW]
+  if len(window) < 3 or window[-1]['wall_time'] <= window[0]['wall_time']:
+    return None
+  return ((window[-1]['env_steps'] - window[0]['env_steps'])
+          / (window[-1]['wall_time'] - window[0]['wall_time']))
+
+
 def dry_run(args: PaperArgs, plan=None) -> str:
   """The plan as text: per cell its status, budget, estimated remaining
-  wall time on this machine and command (and which coop-paper process
-  runs it, if one holds its `claim`); then the total."""
+  wall time on the plan's reference machine and command (and, for a cell
+  that a coop-paper process runs, i.e. holds its `claim`, which one and the
+  pace it measures); then the total at the estimate's rate and, where
+  cells run, at the pace they make together."""
   lines, total = [f'{"cell":32s} {"status":22s} {"budget":>7s}  '
                   f'{"to go":>9s}  command'], 0.0
+  pace = []  # Each running cell's measured rate / its estimated rate.
   cells = selected(args, plan)
   for cell in cells:
     state = status(cell, args)
@@ -324,12 +357,24 @@ def dry_run(args: PaperArgs, plan=None) -> str:
     holder = run_dir.lock_holder(claim_directory(cell, args))
     if holder:
       lines.append(f'  running: coop-paper pid, host {holder}')
+      rate = measured_pace(cell, args)
+      if rate is not None:
+        pace.append(rate / paper_plan.estimated_rate(cell))
+        lines.append(f'  pace: {rate:,.0f} env steps/s over its last '
+                     f'{PACE_WINDOW / 60:g} min of updates, {pace[-1]:.2f}x '
+                     'the estimate')
   lines.append(f'{len(cells)} cells, ~{total / 3600:.0f} h to go at '
                f'{paper_plan.AGENT_STEPS_PER_SECOND:,.0f} Ant steps/s, '
                + ', '.join(f'{agent} at {share:g} of it'
                            for agent, share in
                            paper_plan.VARIANT_SPEED.items())
                + ' (runners.paper_plan)')
+  if pace:
+    running = f'the {len(pace)} cells' if len(pace) > 1 else 'the cell'
+    together = ' together' if len(pace) > 1 else ''
+    lines.append(f'~{total / sum(pace) / 3600:.1f} h at the pace of {running} '
+                 f'running now ({sum(pace):.2f}x the estimate{together}; '
+                 'the rest run as many at a time on the same machines)')
   return '\n'.join(lines)
 
 

@@ -247,5 +247,12 @@ def estimated_seconds(cell: Cell, steps: int, episodes: int = EPISODES
   ant_steps = steps * cell.ants + sum(
       episodes * steps_per_episode * (cell.ants - cell.n_agents + n)
       for n in cell.populations)
-  return ant_steps / (AGENT_STEPS_PER_SECOND
-                      * VARIANT_SPEED.get(cell.agent, 1.0))
+  return ant_steps / (estimated_rate(cell) * cell.ants)
+
+
+def estimated_rate(cell: Cell) -> float:
+  """The estimated training rate of `cell` in env steps/s:
+  `AGENT_STEPS_PER_SECOND` times the variant's `VARIANT_SPEED`, over the
+  Ants of a copy."""
+  return (AGENT_STEPS_PER_SECOND * VARIANT_SPEED.get(cell.agent, 1.0)
+          / cell.ants)

@@ -10,6 +10,7 @@ import socket
 import subprocess
 import sys
 import threading
+import time
 
 import imageio
 import pytest
@@ -427,6 +428,42 @@ def test_the_plan_skips_done_cells_and_resumes_a_partial_one(
 def _plan_cells(*paths):
   by_path = {cell.path: cell for cell in paper_plan.PLAN}
   return [by_path[path] for path in paths]
+
+
+def test_dry_run_measures_the_pace_of_the_cells_running_now(tmp_path):
+  """A claimed cell's metrics.csv gives its pace over its last 10 min of
+  updates; the total is also given at the running cells' pace. A cell
+  whose metrics.csv is stale, or that nobody claims, gives none."""
+  crossers, corridor = cells = _plan_cells('ravine/hrl/crossers/n2/s1',
+                                           'corridor/hrl/n4/s1')
+  args = _args(tmp_path)
+  logdir = paper.run_directory(crossers, args)
+  os.makedirs(logdir)
+  # 1,000 env steps/s for 300 s, then 5,000 for the last 600 s.
+  with open(os.path.join(logdir, 'metrics.csv'), 'w') as f:
+    f.write('update,env_steps,wall_time,success\n')
+    steps = 0
+    for update, wall in enumerate(range(0, 1000, 100)):
+      steps += 100 * (1_000 if wall <= 300 else 5_000) if wall else 0
+      f.write(f'{update + 1},{steps},{wall},\n')
+  pace = 5_000 / paper_plan.estimated_rate(crossers)
+  total = sum(paper_plan.estimated_seconds(c, paper.budget(c, args))
+              for c in cells)
+  with paper.claim(crossers, args):
+    lines = paper.dry_run(args, cells).splitlines()
+    assert lines[3] == ('  pace: 5,000 env steps/s over its last 10 min of '
+                        f'updates, {pace:.2f}x the estimate')
+    assert lines[-1] == (f'~{total / pace / 3600:.1f} h at the pace of the '
+                         f'cell running now ({pace:.2f}x the estimate; the '
+                         'rest run as many at a time on the same machines)')
+    assert not any('pace:' in line for line in lines[4:-1])
+    old = time.time() - paper.PACE_WINDOW - 60
+    os.utime(os.path.join(logdir, 'metrics.csv'), (old, old))
+    lines = paper.dry_run(args, cells).splitlines()
+    assert lines[2].startswith('  running:')
+    assert not any('pace:' in line or 'at the pace' in line for line in lines)
+  os.utime(os.path.join(logdir, 'metrics.csv'))  # Fresh, unclaimed.
+  assert 'pace:' not in paper.dry_run(args, cells)
 
 
 class _FakeCellProcess:
