@@ -5,7 +5,8 @@ One checkpoint is one orbax step, `<logdir>/checkpoints/<update>/`:
   learners/   {species name: {dtype name: one flat array}}: that species'
               saved learner state (params, optimiser, normalisers, update
               counter, PRNG key; `Learner.save()`) packed into one array
-              per dtype (`runners.packing`)
+              per dtype (`runners.packing`), one of over 1 MiB padded with
+              zeros to a multiple of 2^16 elements (`_write`)
   state/      a JSON item: counters (update, env_steps, episodes,
               wall_time, restarts), the run's `TrainArgs`, the agent's
               `HierarchyConfig`, the species layout, the episode window and
@@ -41,7 +42,7 @@ the best one.
 Packed because orbax's cost is per array written (`runners.packing`), at
 one checkpoint an update of a few seconds. Checkpoints of format 2 and 3
 (each learner's state as orbax's own PyTree, arrays of no elements left
-out) read as before.
+out) and 4 (packed, not padded) read as before.
 
 Runs from before orbax (`checkpoints/ckpt_<update>/` and `checkpoints/
 best/`, each with a `<species>.msgpack` per learner and `state.json`) read as
@@ -61,15 +62,17 @@ from typing import Any, Callable, Mapping, Optional
 from runners import packing
 from runners import run_dir
 
-FORMAT = 4
+FORMAT = 5
 """The checkpoint's layout (1: the `state.json` of runs before orbax; 2 and
 3: the learners as orbax PyTrees, 2 with its counter named 'iteration'; 4:
-the learners packed, `runners.packing`)."""
+the learners packed, `runners.packing`; 5: packed, each array of more than
+`_CHUNK_BYTES` zero-padded to a multiple of `_PAD_ELEMENTS`, see `_write`)."""
 BEST = 'best'
 STATE_FILE = 'state.json'  # Runs before orbax.
 _LEGACY_PREFIX = 'ckpt_'
 _ITEMS = ('learners', 'state')
 _CHUNK_BYTES = 2 ** 20  # See `_write`.
+_PAD_ELEMENTS = 2 ** 16
 
 
 class CorruptCheckpoint(ValueError):
@@ -229,7 +232,8 @@ def _write(manager, saved: Mapping[str, dict[str, Any]],
   import orbax.checkpoint as ocp  # pylint: disable=g-import-not-at-top
   arrays, layouts = {}, {}
   for name, s in saved.items():
-    arrays[name], layouts[name] = packing.pack(s['state'])
+    packed, layouts[name] = packing.pack(s['state'])
+    arrays[name] = packing.pad(packed, _PAD_ELEMENTS, _CHUNK_BYTES)
   state = {**state, 'format': FORMAT, 'learners': {
       name: {'kind': s['kind'], 'format': s['format'],
              'layout': layouts[name]}
@@ -241,7 +245,10 @@ def _write(manager, saved: Mapping[str, dict[str, Any]],
   # Packed, a learner is one large array: chunked, and the chunks spread
   # over data files of ~2 MiB, no file of a checkpoint passes ~2.5 MB (a
   # published result or a stash is committed, and the repository takes no
-  # file over 5 MB).
+  # file over 5 MB). Orbax's chunks divide the array: one whose length has
+  # no divisor near 1 MiB's worth (a prime, as a policy's 271,553 floats)
+  # would go in one-element chunks, ~5 s to write and ~85 s to read, hence
+  # the padding to a multiple of 2^16 elements (chunks of 256 KiB-1 MiB).
   save_args = {name: {dtype: ocp.SaveArgs(chunk_byte_size=_CHUNK_BYTES)
                       for dtype in packed}
                for name, packed in arrays.items()}
@@ -362,7 +369,7 @@ def _read(checkpoint: str, items=_ITEMS) -> dict[str, Any]:
   state = read['state']
   if not isinstance(state, dict):
     raise CorruptCheckpoint(f'{checkpoint} holds no checkpoint state.')
-  if state.get('format') not in (2, 3, FORMAT):
+  if state.get('format') not in (2, 3, 4, FORMAT):
     raise ValueError(f'{checkpoint} has checkpoint format '
                      f'{state.get("format")}, expected 2 to {FORMAT}.')
   state = _upgrade(state)
@@ -373,18 +380,20 @@ def _read(checkpoint: str, items=_ITEMS) -> dict[str, Any]:
   if missing:
     raise CorruptCheckpoint(f'{checkpoint} holds no learner for {missing}.')
   saved = read['learners']
-  if state['format'] == FORMAT:
-    saved = {name: _unpacked(checkpoint, name, saved[name], entry)
+  if state['format'] >= 4:
+    multiple = _PAD_ELEMENTS if state['format'] >= 5 else 1
+    saved = {name: _unpacked(checkpoint, name, saved[name], entry, multiple)
              for name, entry in learners.items()}
   return {'state': state, 'learners': saved}
 
 
-def _unpacked(checkpoint: str, species: str, arrays: Any,
-              entry: Any) -> dict[str, Any]:
-  """A species' saved state dict from the packed arrays of a format-4
-  checkpoint and its state entry (`runners.packing`)."""
+def _unpacked(checkpoint: str, species: str, arrays: Any, entry: Any,
+              multiple: int) -> dict[str, Any]:
+  """A species' saved state dict from the packed arrays of a format-4 or
+  -5 checkpoint and its state entry (`runners.packing`; padded to
+  `multiple` elements)."""
   try:
-    return packing.unpack(arrays, entry['layout'])
+    return packing.unpack(arrays, entry['layout'], multiple)
   except (KeyError, TypeError, ValueError) as e:
     raise CorruptCheckpoint(f'{checkpoint}: the {species} learner does not '
                             f'unpack with its layout ({e}).') from None

@@ -45,10 +45,20 @@ def pack(state_dict: Mapping[str, Any]
   return {dtype: a for dtype, a in arrays.items() if a.size}, layout
 
 
-def unpack(arrays: Mapping[str, np.ndarray], layout: Layout
-           ) -> dict[str, Any]:
+def pad(arrays: Mapping[str, np.ndarray], multiple: int, above: int
+        ) -> dict[str, np.ndarray]:
+  """`arrays` (`pack`'s) with each one of more than `above` bytes
+  zero-padded to a multiple of `multiple` elements; `unpack` with the same
+  `multiple` takes them back."""
+  return {dtype: np.pad(a, (0, -a.size % multiple)) if a.nbytes > above
+          else a for dtype, a in arrays.items()}
+
+
+def unpack(arrays: Mapping[str, np.ndarray], layout: Layout,
+           multiple: int = 1) -> dict[str, Any]:
   """The saved state dict that `pack` packed into `arrays` with `layout`;
-  its arrays are views of `arrays`.
+  its arrays are views of `arrays`. With `multiple` > 1 an array may end in
+  fewer than `multiple` zeros that the layout does not place (`pad`).
 
   Raises:
     ValueError: `arrays` and `layout` do not match, or either is malformed.
@@ -70,10 +80,18 @@ def unpack(arrays: Mapping[str, np.ndarray], layout: Layout
           or used[dtype] > np.size(packed)):
         raise ValueError(f'no {dtype} values for {path}')
       flat[tuple(path)] = packed[start:used[dtype]].reshape(shape)
-    extra = [d for d, a in arrays.items() if used.get(d, 0) != np.size(a)]
+    extra = [d for d, a in arrays.items()
+             if not _padding(a, used.get(d, 0), multiple)]
     if extra:
       raise ValueError(f'{extra} values that the layout does not place')
     return traverse_util.unflatten_dict(flat)
   except (AttributeError, IndexError, KeyError, TypeError, ValueError) as e:
     raise ValueError(f'the packed arrays do not match their layout ({e})'
                      ) from None
+
+
+def _padding(packed: np.ndarray, used: int, multiple: int) -> bool:
+  """Whether `packed`'s values after the first `used` are `pad`'s zeros
+  (none where `multiple` is 1)."""
+  rest = np.size(packed) - used
+  return rest == 0 or (0 < rest < multiple and not np.any(packed[used:]))

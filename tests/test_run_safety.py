@@ -392,7 +392,7 @@ def test_learners_are_packed_one_array_per_dtype_and_read_back_whole(
   assert sorted(on_disk['learners']['ant']) == ['float32', 'int32',
                                                 'uint32']
   assert on_disk['learners']['ant']['float32'].shape == (11,)
-  assert on_disk['state']['format'] == checkpoints.FORMAT == 4
+  assert on_disk['state']['format'] == checkpoints.FORMAT == 5
   saved = checkpoints.saved_learner(path, 'ant')
   assert sorted(saved) == ['format', 'kind', 'state']
   _assert_same_state(saved['state'], learner.state)
@@ -436,6 +436,80 @@ def test_no_file_of_a_checkpoint_passes_three_megabytes(tmp_path):
       _BigLearner().save()['state']['w'])
 
 
+def _write_by_hand(directory, step, arrays, state):
+  """An orbax step as a run of an older format wrote it: `arrays` as the
+  learners' tree, `state` as the JSON item; returns its directory."""
+  import orbax.checkpoint as ocp  # pylint: disable=g-import-not-at-top
+  with ocp.CheckpointManager(directory, options=ocp.CheckpointManagerOptions(
+      create=True)) as manager:
+    manager.save(step, args=ocp.args.Composite(
+        learners=ocp.args.PyTreeSave(arrays), state=ocp.args.JsonSave(state)))
+  return os.path.join(directory, str(step))
+
+
+class _PrimeLearner:
+  """A policy's size: 271,553 float32 (a prime number of them, > 1 MiB)."""
+
+  def save(self):
+    rng = np.random.default_rng(1)
+    return {'format': 1, 'kind': 'fake',
+            'state': {'w': rng.random(271_553, np.float32),
+                      'count': np.array(3, np.int32)}}
+
+
+def _chunk_shape(checkpoint, species, dtype):
+  import orbax.checkpoint as ocp  # pylint: disable=g-import-not-at-top
+  with ocp.Checkpointer(ocp.PyTreeCheckpointHandler()) as checkpointer:
+    tree = checkpointer.metadata(os.path.join(checkpoint, 'learners')
+                                 ).item_metadata.tree
+  return tuple(tree[species][dtype].storage.chunk_shape)
+
+
+def test_a_packed_array_of_prime_length_is_padded_into_large_chunks(
+    tmp_path):
+  """Orbax's chunks divide the array: a packed learner of a prime length
+  would be written as one-element chunks (a ravine policy's 271,553: ~5 s to
+  write, ~85 s to read). Arrays over 1 MiB are padded with zeros to a
+  multiple of 2^16 elements, and read back without them."""
+  path = checkpoints.save(str(tmp_path), {'ant': _PrimeLearner()},
+                          _state(1), 3)
+  on_disk = _orbax_items(path)['learners']['ant']
+  assert on_disk['float32'].shape == (5 * 2 ** 16,)  # 327,680.
+  assert not on_disk['float32'][271_553:].any()
+  assert on_disk['int32'].shape == (1,)  # Small arrays as they are.
+  assert _chunk_shape(path, 'ant', 'float32')[0] >= 2 ** 16
+  back = checkpoints.saved_learner(path, 'ant')['state']
+  _assert_same_state(back, _PrimeLearner().save()['state'])
+  # Anything but the padding's zeros after the layout's values is damage.
+  state = checkpoints.read_state(path)
+  for tail in (np.ones(3, np.float32), np.zeros(2 ** 16, np.float32)):
+    damaged = _write_by_hand(str(tmp_path / f'tail{tail.size}'), 1, {'ant': {
+        **on_disk, 'float32': np.concatenate([on_disk['float32'][:271_553],
+                                              tail])}}, state)
+    with pytest.raises(checkpoints.CorruptCheckpoint, match='layout'):
+      checkpoints.check_complete(damaged)
+
+
+def test_a_format_4_checkpoint_reads_unpadded(tmp_path):
+  """Checkpoints packed before the padding (format 4: the stashes and
+  results of 27 November) read as they were written, and nothing may follow
+  their layout's values."""
+  from runners import packing  # pylint: disable=g-import-not-at-top
+  learner = _NestedLearner(3.0)
+  packed, layout = packing.pack(learner.save()['state'])
+  state = {**_state(2), 'format': 4, 'learners': {'ant': {
+      'kind': 'fake', 'format': learner.save()['format'], 'layout': layout}}}
+  exact, padded = (
+      _write_by_hand(str(tmp_path / name), 2, {'ant': {
+          **packed, 'float32': np.concatenate(
+              [packed['float32'], np.zeros(extra, np.float32)])}}, state)
+      for name, extra in (('exact', 0), ('padded', 1)))
+  _assert_same_state(checkpoints.saved_learner(exact, 'ant')['state'],
+                     learner.state)
+  with pytest.raises(checkpoints.CorruptCheckpoint, match='layout'):
+    checkpoints.check_complete(padded)
+
+
 class _TextLearner:
 
   def save(self):
@@ -446,18 +520,13 @@ def test_a_format_3_checkpoint_reads_and_publishes_packed(tmp_path):
   """A run checkpoint written before the packing (format 3: orbax's own
   tree, arrays without elements as None; the stashes of 27 November and
   before) reads as it did, and its policy is published packed."""
-  import orbax.checkpoint as ocp  # pylint: disable=g-import-not-at-top
   learner = _NestedLearner(2.0)
   arrays = {'ant': jax.tree.map(lambda a: None if np.size(a) == 0 else a,
                                 learner.save()['state'])}
   state = {**_state(5), 'format': 3, 'learners': {'ant': {
       'kind': 'fake', 'format': learner.save()['format']}}}
   logdir = str(tmp_path / 'run')
-  with ocp.CheckpointManager(os.path.join(logdir, 'checkpoints'),
-                             options=ocp.CheckpointManagerOptions(
-                                 create=True)) as manager:
-    manager.save(5, args=ocp.args.Composite(
-        learners=ocp.args.PyTreeSave(arrays), state=ocp.args.JsonSave(state)))
+  _write_by_hand(os.path.join(logdir, 'checkpoints'), 5, arrays, state)
   old = checkpoints.resolve(logdir)
   assert checkpoints.read_state(old)['format'] == 3
   back = checkpoints.saved_learner(old, 'ant')['state']
@@ -467,7 +536,7 @@ def test_a_format_3_checkpoint_reads_and_publishes_packed(tmp_path):
                      {**learner.state, 'normalizer': {
                          'mean': learner.state['normalizer']['mean']}})
   published = checkpoints.write_policy(old, str(tmp_path / 'published'))
-  assert checkpoints.check_complete(published)['format'] == 4
+  assert checkpoints.check_complete(published)['format'] == checkpoints.FORMAT
   policy = checkpoints.saved_learner(published, 'ant')['state']
   assert sorted(policy) == ['normalizer', 'params', 'value_normalizer']
   assert policy['normalizer']['empty'] is None  # Carried as read.
