@@ -66,13 +66,13 @@ FORMAT = 5
 """The checkpoint's layout (1: the `state.json` of runs before orbax; 2 and
 3: the learners as orbax PyTrees, 2 with its counter named 'iteration'; 4:
 the learners packed, `runners.packing`; 5: packed, each array of more than
-`_CHUNK_BYTES` zero-padded to a multiple of `_PAD_ELEMENTS`, see `_write`)."""
+`_CHUNK_BYTES` zero-padded to a multiple of 2^16 elements, see `_write`)."""
 BEST = 'best'
 STATE_FILE = 'state.json'  # Runs before orbax.
 _LEGACY_PREFIX = 'ckpt_'
 _ITEMS = ('learners', 'state')
 _CHUNK_BYTES = 2 ** 20  # See `_write`.
-_PAD_ELEMENTS = 2 ** 16
+_PADDING = (2 ** 16, _CHUNK_BYTES)  # `packing.pad`'s (multiple, above).
 
 
 class CorruptCheckpoint(ValueError):
@@ -233,7 +233,7 @@ def _write(manager, saved: Mapping[str, dict[str, Any]],
   arrays, layouts = {}, {}
   for name, s in saved.items():
     packed, layouts[name] = packing.pack(s['state'])
-    arrays[name] = packing.pad(packed, _PAD_ELEMENTS, _CHUNK_BYTES)
+    arrays[name] = packing.pad(packed, _PADDING)
   state = {**state, 'format': FORMAT, 'learners': {
       name: {'kind': s['kind'], 'format': s['format'],
              'layout': layouts[name]}
@@ -248,7 +248,8 @@ def _write(manager, saved: Mapping[str, dict[str, Any]],
   # file over 5 MB). Orbax's chunks divide the array: one whose length has
   # no divisor near 1 MiB's worth (a prime, as a policy's 271,553 floats)
   # would go in one-element chunks, ~5 s to write and ~85 s to read, hence
-  # the padding to a multiple of 2^16 elements (chunks of 256 KiB-1 MiB).
+  # the padding to a multiple of 2^16 elements (float32 chunks of 256 KiB
+  # to 1 MiB).
   save_args = {name: {dtype: ocp.SaveArgs(chunk_byte_size=_CHUNK_BYTES)
                       for dtype in packed}
                for name, packed in arrays.items()}
@@ -381,19 +382,18 @@ def _read(checkpoint: str, items=_ITEMS) -> dict[str, Any]:
     raise CorruptCheckpoint(f'{checkpoint} holds no learner for {missing}.')
   saved = read['learners']
   if state['format'] >= 4:
-    multiple = _PAD_ELEMENTS if state['format'] >= 5 else 1
-    saved = {name: _unpacked(checkpoint, name, saved[name], entry, multiple)
+    padding = _PADDING if state['format'] >= 5 else (1, 0)
+    saved = {name: _unpacked(checkpoint, name, saved[name], entry, padding)
              for name, entry in learners.items()}
   return {'state': state, 'learners': saved}
 
 
 def _unpacked(checkpoint: str, species: str, arrays: Any, entry: Any,
-              multiple: int) -> dict[str, Any]:
+              padding: packing.Padding) -> dict[str, Any]:
   """A species' saved state dict from the packed arrays of a format-4 or
-  -5 checkpoint and its state entry (`runners.packing`; padded to
-  `multiple` elements)."""
+  -5 checkpoint and its state entry (`runners.packing`, with `padding`)."""
   try:
-    return packing.unpack(arrays, entry['layout'], multiple)
+    return packing.unpack(arrays, entry['layout'], padding)
   except (KeyError, TypeError, ValueError) as e:
     raise CorruptCheckpoint(f'{checkpoint}: the {species} learner does not '
                             f'unpack with its layout ({e}).') from None

@@ -45,20 +45,29 @@ def pack(state_dict: Mapping[str, Any]
   return {dtype: a for dtype, a in arrays.items() if a.size}, layout
 
 
-def pad(arrays: Mapping[str, np.ndarray], multiple: int, above: int
+Padding = tuple[int, int]
+"""(multiple, above) of `pad`."""
+
+
+def pad(arrays: Mapping[str, np.ndarray], padding: Padding
         ) -> dict[str, np.ndarray]:
   """`arrays` (`pack`'s) with each one of more than `above` bytes
-  zero-padded to a multiple of `multiple` elements; `unpack` with the same
-  `multiple` takes them back."""
-  return {dtype: np.pad(a, (0, -a.size % multiple)) if a.nbytes > above
-          else a for dtype, a in arrays.items()}
+  zero-padded to a multiple of `multiple` elements, `padding` = (multiple,
+  above); `unpack` with the same `padding` takes them back."""
+  return {dtype: np.pad(a, (0, _padded_size(a.size, a.itemsize, padding)
+                            - a.size))
+          for dtype, a in arrays.items()}
+
+
+def _padded_size(size: int, itemsize: int, padding: Padding) -> int:
+  multiple, above = padding
+  return size + (-size % multiple) if size * itemsize > above else size
 
 
 def unpack(arrays: Mapping[str, np.ndarray], layout: Layout,
-           multiple: int = 1) -> dict[str, Any]:
-  """The saved state dict that `pack` packed into `arrays` with `layout`;
-  its arrays are views of `arrays`. With `multiple` > 1 an array may end in
-  fewer than `multiple` zeros that the layout does not place (`pad`).
+           padding: Padding = (1, 0)) -> dict[str, Any]:
+  """The saved state dict that `pack` packed into `arrays` with `layout`
+  (and `pad` padded with `padding`); its arrays are views of `arrays`.
 
   Raises:
     ValueError: `arrays` and `layout` do not match, or either is malformed.
@@ -81,7 +90,7 @@ def unpack(arrays: Mapping[str, np.ndarray], layout: Layout,
         raise ValueError(f'no {dtype} values for {path}')
       flat[tuple(path)] = packed[start:used[dtype]].reshape(shape)
     extra = [d for d, a in arrays.items()
-             if not _padding(a, used.get(d, 0), multiple)]
+             if not _only_padding(a, used.get(d, 0), padding)]
     if extra:
       raise ValueError(f'{extra} values that the layout does not place')
     return traverse_util.unflatten_dict(flat)
@@ -90,8 +99,9 @@ def unpack(arrays: Mapping[str, np.ndarray], layout: Layout,
                      ) from None
 
 
-def _padding(packed: np.ndarray, used: int, multiple: int) -> bool:
-  """Whether `packed`'s values after the first `used` are `pad`'s zeros
-  (none where `multiple` is 1)."""
-  rest = np.size(packed) - used
-  return rest == 0 or (0 < rest < multiple and not np.any(packed[used:]))
+def _only_padding(packed: np.ndarray, used: int, padding: Padding) -> bool:
+  """Whether a 1-D `packed` holds `used` values and then exactly the zeros
+  that `pad` adds to as many."""
+  size = _padded_size(used, np.dtype(packed.dtype).itemsize, padding)
+  return (np.ndim(packed) == 1 and np.size(packed) == size
+          and not np.any(packed[used:]))

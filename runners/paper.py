@@ -32,7 +32,9 @@ over the cells another one runs, exiting with status 3
 docs/paper.md.
 """
 import contextlib
+import csv
 import dataclasses
+import math
 import os
 import shutil
 import signal
@@ -320,15 +322,16 @@ def measured_pace(cell: paper_plan.Cell, args: PaperArgs
                                       ) > PACE_WINDOW:
       return None
     rows = plot.read_metrics(logdir)
-  except (OSError, ValueError):
+  except (OSError, ValueError, csv.Error):
     return None
   rows = [r for r in rows if 'env_steps' in r and 'wall_time' in r]
   window = [r for r in rows
             if rows[-1]['wall_time'] - r['wall_time'] <= PACE_WINDOW]
   if len(window) < 3 or window[-1]['wall_time'] <= window[0]['wall_time']:
     return None
-  return ((window[-1]['env_steps'] - window[0]['env_steps'])
+  rate = ((window[-1]['env_steps'] - window[0]['env_steps'])
           / (window[-1]['wall_time'] - window[0]['wall_time']))
+  return rate if rate > 0 and math.isfinite(rate) else None
 
 
 def dry_run(args: PaperArgs, plan=None) -> str:

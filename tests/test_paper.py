@@ -464,6 +464,13 @@ def test_dry_run_measures_the_pace_of_the_cells_running_now(tmp_path):
     assert not any('pace:' in line or 'at the pace' in line for line in lines)
   os.utime(os.path.join(logdir, 'metrics.csv'))  # Fresh, unclaimed.
   assert 'pace:' not in paper.dry_run(args, cells)
+  # Too little to measure: no rows, two rows, no steps made.
+  for text in ('update,env_steps,wall_time\n',
+               'update,env_steps,wall_time\n1,10,1\n2,20,2\n',
+               'update,env_steps,wall_time\n1,10,1\n2,10,2\n3,10,3\n'):
+    with open(os.path.join(logdir, 'metrics.csv'), 'w') as f:
+      f.write(text)
+    assert paper.measured_pace(crossers, args) is None
 
 
 class _FakeCellProcess:

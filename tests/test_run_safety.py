@@ -480,14 +480,21 @@ def test_a_packed_array_of_prime_length_is_padded_into_large_chunks(
   assert _chunk_shape(path, 'ant', 'float32')[0] >= 2 ** 16
   back = checkpoints.saved_learner(path, 'ant')['state']
   _assert_same_state(back, _PrimeLearner().save()['state'])
-  # Anything but the padding's zeros after the layout's values is damage.
+  # Anything but exactly the padding's zeros after the layout's values is
+  # damage: other values, more zeros, zeros after a small array (never
+  # padded), an array of a dtype the layout does not place.
   state = checkpoints.read_state(path)
-  for tail in (np.ones(3, np.float32), np.zeros(2 ** 16, np.float32)):
-    damaged = _write_by_hand(str(tmp_path / f'tail{tail.size}'), 1, {'ant': {
-        **on_disk, 'float32': np.concatenate([on_disk['float32'][:271_553],
-                                              tail])}}, state)
+  values = on_disk['float32'][:271_553]
+  for i, damaged in enumerate([
+      {'float32': np.concatenate([values, np.ones(3, np.float32)])},
+      {'float32': np.concatenate([values, np.zeros(2 ** 16, np.float32)])},
+      {'float32': on_disk['float32'][:-1]},
+      {'int32': np.zeros(4, np.int32)},
+      {'int64': np.zeros(4, np.int64)}]):
+    checkpoint = _write_by_hand(str(tmp_path / f'damaged{i}'), 1,
+                                {'ant': {**on_disk, **damaged}}, state)
     with pytest.raises(checkpoints.CorruptCheckpoint, match='layout'):
-      checkpoints.check_complete(damaged)
+      checkpoints.check_complete(checkpoint)
 
 
 def test_a_format_4_checkpoint_reads_unpadded(tmp_path):
