@@ -251,8 +251,8 @@ def _write(manager, saved: Mapping[str, dict[str, Any]],
   # the padding to a multiple of 2^16 elements (float32 chunks of 256 KiB
   # to 1 MiB).
   save_args = {name: {dtype: ocp.SaveArgs(chunk_byte_size=_CHUNK_BYTES)
-                      for dtype in packed}
-               for name, packed in arrays.items()}
+                      for dtype in padded}
+               for name, padded in arrays.items()}
   with _orbax_quiet():
     manager.save(update, metrics=metrics, force=True,
                  args=ocp.args.Composite(
