@@ -323,9 +323,10 @@ def report(args: paper.PaperArgs, plan=None) -> str:
               'the legend gives how many models. A transport model\'s line '
               'begins with its push stage, whose return leaves out the '
               'agent-target term (hence its step when the joint run '
-              'starts). Fig. 5: every evaluation '
-              'episode of the final checkpoints at its start layout, filled '
-              'for a success.', '']
+              'starts). Fig. 5: each start layout of the evaluation '
+              "episodes, coloured by the share of the variant's final "
+              'checkpoints that succeeded from it (the models share the '
+              'starts).', '']
     for caption, path in drawn:
       lines += [f'![{caption}]({os.path.relpath(path, base)})', '']
   lines += ['### Commands', '',

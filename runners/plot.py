@@ -153,7 +153,8 @@ def _panels(columns):
 
 
 def _save(fig, out):
-  fig.tight_layout()
+  if fig.get_layout_engine() is None:  # Not made with layout='constrained'.
+    fig.tight_layout()
   os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
   fig.savefig(out, dpi=100)
   plt.close(fig)
@@ -188,26 +189,41 @@ def plot(runs: Union[str, Sequence[str]], columns, out, title=None):
   _save(fig, out)
 
 
+def starts_and_shares(x, y, success):
+  """(x, y, share) per distinct start of the episodes (x, y, success): the
+  models of one variant are evaluated on the same starts, so each start is
+  one point, with the share of its episodes that succeeded."""
+  points = np.stack([np.asarray(x, np.float64), np.asarray(y, np.float64)],
+                    axis=1)
+  starts, index = np.unique(np.round(points, 6), axis=0, return_inverse=True)
+  index = index.reshape(-1)
+  won = np.asarray(success, np.float64) > 0.5
+  share = np.bincount(index, weights=won) / np.bincount(index)
+  return starts[:, 0], starts[:, 1], share
+
+
 def success_by_start(panels: Mapping[str, tuple], xlabel, ylabel, out,
                      title):
   """Writes one scatter panel per label of `panels` (label -> (x, y,
-  success) arrays over episodes) to `out`: successes filled, failures
-  hollow, the panel's success rate in its title."""
+  success) arrays over episodes) to `out`: one point per start, coloured by
+  the share of its episodes (one per model) that succeeded
+  (`starts_and_shares`), the panel's success rate in its title."""
   fig, axes = plt.subplots(1, len(panels),
-                           figsize=(max(6.5, 4.2 * len(panels)), 3.8),
-                           squeeze=False, sharex=True, sharey=True)
+                           figsize=(max(6.5, 4.2 * len(panels)) + 0.8, 3.8),
+                           squeeze=False, sharex=True, sharey=True,
+                           layout="constrained")  # Room for the colour bar.
   for ax, (label, (x, y, success)) in zip(axes[0], panels.items()):
-    x, y, success = (np.asarray(v, np.float64) for v in (x, y, success))
-    won = success > 0.5
-    ax.scatter(x[won], y[won], s=14, color="tab:green", label="success")
-    ax.scatter(x[~won], y[~won], s=14, facecolors="none",
-               edgecolors="tab:red", label="failure")
-    ax.set_title(f"{label}: {100 * won.mean():.0f}% of {len(won)}",
-                 fontsize=9)
+    won = np.asarray(success, np.float64) > 0.5
+    sx, sy, share = starts_and_shares(x, y, success)
+    points = ax.scatter(sx, sy, c=share, s=16, cmap="RdYlGn", vmin=0.0,
+                        vmax=1.0, edgecolors="black", linewidths=0.3)
+    ax.set_title(f"{label.replace('`', '')}: {100 * won.mean():.0f}% of "
+                 f"{len(won)} episodes, {len(sx)} starts", fontsize=9)
     ax.set_xlabel(xlabel)
     ax.grid(alpha=0.3)
   axes[0][0].set_ylabel(ylabel)
-  axes[0][0].legend(fontsize=7)
+  fig.colorbar(points, ax=list(axes[0]), fraction=0.03,
+               label="share of the start's episodes that succeeded")
   fig.suptitle(title, fontsize=10)
   _save(fig, out)
 

@@ -65,3 +65,18 @@ def test_the_stages_of_one_model_are_one_curve(tmp_path, capsys):
   with pytest.raises(SystemExit):
     plot.main([f"{push}+{tmp_path / 'nope'}", "--out", str(out)])
   assert "nope" in capsys.readouterr().err
+
+
+def test_success_by_start_gives_each_start_its_models_share(tmp_path):
+  # Two models on the same three starts (episodes in model order), one
+  # model alone on them too: a start is one point with its success share.
+  x, y = [4.0, 5.0, 6.0] * 2, [3.0, 3.5, 4.0] * 2
+  success = [1.0, 0.0, 1.0, 1.0, 0.0, 0.0]
+  sx, sy, share = plot.starts_and_shares(x, y, success)
+  assert sx.tolist() == [4.0, 5.0, 6.0] and sy.tolist() == [3.0, 3.5, 4.0]
+  assert share.tolist() == [1.0, 0.0, 0.5]
+  out = tmp_path / "starts.png"
+  plot.success_by_start({"HRL": (x, y, success),
+                         "one model": (x[:3], y[:3], success[:3])},
+                        "x", "y", str(out), "by start")
+  assert imageio.v2.imread(out).ndim == 3
