@@ -40,7 +40,7 @@ setuptools.setup(
         "imageio",
         "imageio-ffmpeg",
         "tqdm",
-        "matplotlib",
+        "matplotlib>=3.6",  # Figure.get_layout_engine (runners.plot).
         "tensorboardX",
         # Every CLI (runners.cli); its private parse-error hook turns a
         # refused value into one line, else tyro's own box: pinned to the

@@ -68,8 +68,8 @@ def test_the_stages_of_one_model_are_one_curve(tmp_path, capsys):
 
 
 def test_success_by_start_gives_each_start_its_models_share(tmp_path):
-  # Two models on the same three starts (episodes in model order), one
-  # model alone on them too: a start is one point with its success share.
+  # Two models on the same three starts (episodes in model order): a start
+  # is one point with its success share. A second panel draws one model's.
   x, y = [4.0, 5.0, 6.0] * 2, [3.0, 3.5, 4.0] * 2
   success = [1.0, 0.0, 1.0, 1.0, 0.0, 0.0]
   sx, sy, share = plot.starts_and_shares(x, y, success)
