@@ -42,7 +42,7 @@ REPO = os.path.join(os.path.dirname(os.path.abspath(__file__)), '..')
 sys.path.insert(0, REPO)
 
 from runners import actor_pool  # pylint: disable=g-import-not-at-top
-from runners import plot  # pylint: disable=g-import-not-at-top
+from runners import run_dir  # pylint: disable=g-import-not-at-top
 
 
 def _start(task, n_agents, actors, copies, seed, logdir, env=None):
@@ -62,7 +62,7 @@ def _env_steps(logdir):
   row caught half-written reads as fewer, which `measure` skips)."""
   if not os.path.exists(os.path.join(logdir, 'metrics.csv')):
     return 0
-  rows = plot.read_metrics(logdir)
+  rows = run_dir.read_metrics(logdir)
   return int(rows[-1].get('env_steps', 0)) if rows else 0
 
 

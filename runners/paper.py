@@ -315,13 +315,12 @@ def measured_pace(cell: paper_plan.Cell, args: PaperArgs
   seconds of updates (its run directory's metrics.csv: env steps over the
   updates' wall time, which leaves out the ~1-2% between updates), or None
   without a fresh metrics.csv holding 3 rows in that window."""
-  from runners import plot  # pylint: disable=g-import-not-at-top
   logdir = run_directory(cell, args)
   try:
     if time.time() - os.path.getmtime(os.path.join(logdir, 'metrics.csv')
                                       ) > PACE_WINDOW:
       return None
-    rows = plot.read_metrics(logdir)
+    rows = run_dir.read_metrics(logdir)
   except (OSError, ValueError, csv.Error):
     return None
   rows = [r for r in rows if 'env_steps' in r and 'wall_time' in r]

@@ -21,7 +21,6 @@ push stage and the joint run started from it:
         --columns success --out docs/images/transport_curriculum_s0.png
 """
 
-import csv
 import dataclasses
 import os
 from typing import Annotated, Mapping, Sequence, Union
@@ -31,6 +30,7 @@ import numpy as np
 import tyro
 
 from runners import cli
+from runners import run_dir
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # pylint: disable=g-import-not-at-top
@@ -57,22 +57,6 @@ class PlotArgs:
       raise ValueError("--columns must name at least one column.")
 
 
-def read_metrics(run_dir):
-  """Rows of `run_dir/metrics.csv` as dicts of floats (empty cells dropped)."""
-  path = os.path.join(run_dir, "metrics.csv")
-  rows = []
-  with open(path, newline="") as f:
-    for row in csv.DictReader(f):
-      parsed = {}
-      for key, value in row.items():
-        try:
-          parsed[key] = float(value)
-        except (TypeError, ValueError):
-          continue
-      rows.append(parsed)
-  return rows
-
-
 STAGES = "+"
 """Joins the stages of one model in a run argument (`read_stages`)."""
 
@@ -84,11 +68,11 @@ def stages(run):
 
 
 def read_stages(run):
-  """`read_metrics` of a run, or of the stages of one model written `A+B`
-  (B's env steps and wall time after A's last ones)."""
+  """`run_dir.read_metrics` of a run, or of the stages of one model written
+  `A+B` (B's env steps and wall time after A's last ones)."""
   rows = []
   for stage in stages(run):
-    stage_rows = read_metrics(stage)
+    stage_rows = run_dir.read_metrics(stage)
     if rows:
       offset = {key: rows[-1][key] for key in ("env_steps", "wall_time")
                 if key in rows[-1]}

@@ -246,6 +246,22 @@ def _missing(value):
   return value is None or (isinstance(value, float) and math.isnan(value))
 
 
+def read_metrics(logdir):
+  """Rows of `logdir/metrics.csv` (`MetricsLog`'s) as dicts of floats, empty
+  and non-numeric cells dropped."""
+  rows = []
+  with open(os.path.join(logdir, 'metrics.csv'), newline='') as f:
+    for row in csv.DictReader(f):
+      parsed = {}
+      for key, value in row.items():
+        try:
+          parsed[key] = float(value)
+        except (TypeError, ValueError):
+          continue
+      rows.append(parsed)
+  return rows
+
+
 def logged_row(logdir, update):
   """The metrics.csv row of `update` as {column: float} (empty cells left
   out), or {} when there is none: what an export from a checkpoint reports."""

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from runners import plot
+from runners import run_dir
 
 
 def _run(path, rows):
@@ -30,7 +31,7 @@ def test_several_runs_give_their_mean_and_band(tmp_path, capsys):
   a = _run(tmp_path / "s0", [(1000, 0.0, 0.0), (2000, 2.0, 0.5),
                              (3000, 4.0, 1.0)])
   b = _run(tmp_path / "s1", [(1500, 1.5, 0.0), (2500, 3.5, 1.0)])
-  steps, mean, error = plot.mean_and_band([plot._curve(plot.read_metrics(r),  # pylint: disable=protected-access
+  steps, mean, error = plot.mean_and_band([plot._curve(run_dir.read_metrics(r),  # pylint: disable=protected-access
                                                        "return")
                                            for r in (a, b)])
   # Where both runs have data, at both runs' steps, interpolated.
