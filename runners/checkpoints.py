@@ -269,15 +269,29 @@ def discard_after(logdir: str, update: int) -> None:
       shutil.rmtree(checkpoint)
 
 
+LIST_TRIES = 5
+"""Times `list_checkpoints` lists a run before a step that vanishes while it
+is listed (a running writer removing an old one) is taken as an error."""
+
+
 def list_checkpoints(logdir: str) -> list[str]:
   """Checkpoint directories of a run (orbax steps and those from before
-  orbax), oldest first; orbax's temporary ones are left out."""
-  found = _legacy_checkpoints(logdir)
-  if os.path.isdir(_directory(logdir)):
-    with _manager(_directory(logdir)) as manager:
-      found += [_step_path(logdir, step)
-                for step in manager.all_steps()]
-  return sorted(found, key=lambda path: (_update(path), _is_step(path)))
+  orbax), oldest first; orbax's temporary ones are left out. A run that is
+  being written can be listed (`coop-paper --dry-run` beside training):
+  orbax reads each step it finds, and a step the writer removes between
+  the two is listed again."""
+  for tries_left in reversed(range(LIST_TRIES)):
+    found = _legacy_checkpoints(logdir)
+    try:
+      if os.path.isdir(_directory(logdir)):
+        with _manager(_directory(logdir)) as manager:
+          found += [_step_path(logdir, step)
+                    for step in manager.all_steps()]
+    except FileNotFoundError:
+      if not tries_left:
+        raise
+      continue
+    return sorted(found, key=lambda path: (_update(path), _is_step(path)))
 
 
 def _update(checkpoint: str) -> int:

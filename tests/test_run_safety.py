@@ -309,6 +309,30 @@ def test_a_run_writer_saves_in_the_background_what_one_shot_saves_keep(
                                           checkpoints.BEST)) == paths[2]
 
 
+def test_a_run_is_listed_while_its_writer_removes_a_step(tmp_path,
+                                                        monkeypatch):
+  # The writer of a running run removes its oldest step after orbax found
+  # it and before orbax reads it: the listing is taken again.
+  from orbax.checkpoint._src.path import step as step_lib  # pylint: disable=g-import-not-at-top
+  logdir = str(tmp_path)
+  paths = [_save(logdir, i, keep=3) for i in range(1, 4)]
+  find_all, to_remove = step_lib._StandardNameFormat.find_all, [paths[0]]
+
+  def find_all_then_remove(self, base_path):
+    found = list(find_all(self, base_path))
+    if to_remove:
+      shutil.rmtree(to_remove.pop())
+    return found
+  monkeypatch.setattr(step_lib._StandardNameFormat, 'find_all',
+                      find_all_then_remove)
+  assert checkpoints.list_checkpoints(logdir) == paths[1:]
+  assert not to_remove
+  monkeypatch.setattr(checkpoints, 'LIST_TRIES', 1)  # Once: the error.
+  to_remove.append(paths[1])
+  with pytest.raises(FileNotFoundError, match=os.path.basename(paths[1])):
+    checkpoints.list_checkpoints(logdir)
+
+
 def test_the_newest_and_the_best_are_kept(tmp_path):
   logdir = str(tmp_path)
   assert checkpoints.list_checkpoints(logdir) == []
