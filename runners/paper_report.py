@@ -10,7 +10,6 @@ evaluations in a table of their own; with `--figures`, the learning
 curves of the committed cells (their metrics.csv) as PNGs, linked; then
 each cell's command.
 """
-import csv
 import json
 import os
 from typing import Any, Optional
@@ -386,12 +385,11 @@ def _training_return(cells, args) -> str:
   """Mean over the models of the last metrics.csv row's window return."""
   values = []
   for cell in cells:
-    path = os.path.join(paper.results_directory(cell, args), 'metrics.csv')
-    if os.path.exists(path):
-      with open(path, newline='') as f:
-        rows = [r for r in csv.DictReader(f) if r.get('return')]
+    folder = paper.results_directory(cell, args)
+    if os.path.exists(os.path.join(folder, 'metrics.csv')):
+      rows = [r for r in run_dir.read_metrics(folder) if 'return' in r]
       if rows:
-        values.append(float(rows[-1]['return']))
+        values.append(rows[-1]['return'])
   return f'{sum(values) / len(values):.0f}' if values else ''
 
 

@@ -263,16 +263,12 @@ def read_metrics(logdir):
 
 
 def logged_row(logdir, update):
-  """The metrics.csv row of `update` as {column: float} (empty cells left
-  out), or {} when there is none: what an export from a checkpoint reports."""
-  path = os.path.join(logdir, 'metrics.csv')
-  if not os.path.exists(path):
+  """The metrics.csv row of `update` as {column: float} (`read_metrics`'s),
+  or {} when there is none: what an export from a checkpoint reports."""
+  if not os.path.exists(os.path.join(logdir, 'metrics.csv')):
     return {}
-  with open(path, newline='') as f:
-    for row in csv.DictReader(f):
-      if int(row['update']) == update:
-        return {k: float(v) for k, v in row.items() if v != ''}
-  return {}
+  return next((row for row in read_metrics(logdir)
+               if row.get('update') == update), {})
 
 
 class MetricsLog:
