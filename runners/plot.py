@@ -173,6 +173,11 @@ def plot(runs: Union[str, Sequence[str]], columns, out, title=None):
   _save(fig, out)
 
 
+def succeeded(success):
+  """Each episode's success (a 0/1 or boolean value per episode) as bools."""
+  return np.asarray(success, np.float64) > 0.5
+
+
 def starts_and_shares(x, y, success):
   """(x, y, share) per distinct start of the episodes (x, y, success): the
   models of one variant are evaluated on the same starts, so each start is
@@ -181,7 +186,7 @@ def starts_and_shares(x, y, success):
                     axis=1)
   starts, index = np.unique(np.round(points, 6), axis=0, return_inverse=True)
   index = index.reshape(-1)
-  won = np.asarray(success, np.float64) > 0.5
+  won = succeeded(success)
   share = np.bincount(index, weights=won) / np.bincount(index)
   return starts[:, 0], starts[:, 1], share
 
@@ -197,7 +202,7 @@ def success_by_start(panels: Mapping[str, tuple], xlabel, ylabel, out,
                            squeeze=False, sharex=True, sharey=True,
                            layout="constrained")  # Room for the colour bar.
   for ax, (label, (x, y, success)) in zip(axes[0], panels.items()):
-    won = np.asarray(success, np.float64) > 0.5
+    won = succeeded(success)
     sx, sy, share = starts_and_shares(x, y, success)
     points = ax.scatter(sx, sy, c=share, s=16, cmap="RdYlGn", vmin=0.0,
                         vmax=1.0, edgecolors="black", linewidths=0.3)
