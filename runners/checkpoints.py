@@ -127,6 +127,42 @@ def _orbax_quiet():
     logger.setLevel(level)
 
 
+class _StepInFlightFilter(logging.Filter):
+  """Drops orbax's two log lines about the metadata file of the step it is
+  writing (`<update>.orbax-checkpoint-tmp/_CHECKPOINT_METADATA`): its
+  background thread reads that file while its own queued write of it has
+  not yet run ('does not exist') or is half done ('Failed to json parse',
+  empty content). Orbax then takes the same answer from the save itself and
+  commits the whole file before the step's rename, so these are no news;
+  the same lines about a committed step still show."""
+
+  _MISSING = 'Metadata file does not exist: %s'
+  _UNPARSED = 'Failed to json parse Metadata file: %s, '
+
+  def filter(self, record: logging.LogRecord) -> bool:
+    args = record.args if isinstance(record.args, tuple) else ()
+    if not args or not _in_flight(args[0]):
+      return True
+    if record.msg == self._MISSING:
+      return False
+    return not (isinstance(record.msg, str)
+                and record.msg.startswith(self._UNPARSED)
+                and len(args) > 1 and not str(args[1]).strip())
+
+
+def _in_flight(path) -> bool:
+  """Whether `path` is a file of a step orbax has not committed yet."""
+  return '.orbax-checkpoint-tmp' in os.path.basename(
+      os.path.dirname(os.fspath(path)))
+
+
+def _quiet_steps_in_flight() -> None:
+  """Installs `_StepInFlightFilter` on absl's logger (once a process)."""
+  logger = logging.getLogger('absl')
+  if not any(isinstance(f, _StepInFlightFilter) for f in logger.filters):
+    logger.addFilter(_StepInFlightFilter())
+
+
 class Writer:
   """A run's checkpoint writer (its one writer process): one manager for
   the run, each checkpoint finishing in the background (module doc).
@@ -139,6 +175,7 @@ class Writer:
       background: False: each `save` returns when its checkpoint is whole.
     """
     self._logdir, self._keep = logdir, keep
+    _quiet_steps_in_flight()
     self._manager = _manager(_directory(logdir), keep, background)
     self._new_best = None  # Of the save in flight (see `_finish`).
 

@@ -2,6 +2,7 @@
 of a write, damaged checkpoints, bad flags, SIGTERM."""
 import csv
 import json
+import logging
 import os
 import re
 import shutil
@@ -332,6 +333,34 @@ def test_a_run_is_listed_while_its_writer_removes_a_step(tmp_path,
   to_remove.append(paths[1])
   with pytest.raises(FileNotFoundError, match=re.escape(paths[1])):
     checkpoints.list_checkpoints(logdir)
+
+
+def test_orbax_reading_its_step_in_flight_is_not_logged(tmp_path, caplog):
+  # Orbax's background thread reads the metadata file of the step it is
+  # writing before its own queued write has run (missing) or finished
+  # (empty); a writer hides those two lines, not the same about a
+  # committed step.
+  from orbax.checkpoint._src.metadata import checkpoint as metadata_lib  # pylint: disable=g-import-not-at-top
+  logdir = str(tmp_path)
+  _save(logdir, 1)  # A writer has run in this process.
+  store = metadata_lib.metadata_store(enable_write=False)
+  folder = os.path.join(logdir, 'checkpoints')
+  in_flight = os.path.join(folder, '2.orbax-checkpoint-tmp')
+  os.makedirs(in_flight)
+  missing = os.path.join(in_flight, '_CHECKPOINT_METADATA')
+  committed = os.path.join(folder, '3', '_CHECKPOINT_METADATA')
+  with caplog.at_level(logging.WARNING):
+    assert store.read(missing) is None
+    open(missing, 'w').close()  # Created, not yet written.
+    assert store.read(missing) is None
+    assert caplog.records == []
+    assert store.read(committed) is None
+    os.makedirs(os.path.dirname(committed))
+    open(committed, 'w').close()
+    assert store.read(committed) is None
+  assert [r.getMessage().split(':')[0] for r in caplog.records] == [
+      'Metadata file does not exist', 'Failed to json parse Metadata file']
+  assert all(committed in r.getMessage() for r in caplog.records)
 
 
 def test_the_newest_and_the_best_are_kept(tmp_path):
