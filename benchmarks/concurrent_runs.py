@@ -60,7 +60,7 @@ def _start(task, n_agents, actors, copies, seed, logdir, env=None):
 def _env_steps(logdir):
   """The newest row's env steps in the run's metrics.csv (0 before one; a
   row caught half-written reads as fewer, which `measure` skips)."""
-  if not os.path.exists(os.path.join(logdir, 'metrics.csv')):
+  if not run_dir.has_metrics(logdir):
     return 0
   rows = run_dir.read_metrics(logdir)
   return int(rows[-1].get('env_steps', 0)) if rows else 0

@@ -64,8 +64,8 @@ def check_run_directory(args: config_lib.TrainArgs) -> Optional[str]:
     checkpoints.check_resumable(checkpoint, saved)
     config_lib.check_resumable(saved['args'], args)
     return checkpoint
-  if checkpoints.list_checkpoints(args.logdir) or os.path.exists(
-      os.path.join(args.logdir, 'metrics.csv')):
+  if (checkpoints.list_checkpoints(args.logdir)
+      or run_dir.has_metrics(args.logdir)):
     raise FileExistsError(f'{args.logdir} already holds a run: pass --resume '
                           'or choose another --logdir.')
   return None

@@ -7,7 +7,8 @@
 
 The plan (`runners.paper_plan.PLAN`) is data: task x variant x population x
 seed, with budgets and flags. A cell is done when `--results`/<cell>/ holds
-its metrics.csv, its final checkpoint's policy (with the lower layer it was
+its metrics.csv (metrics.csv.gz when over `run_dir.PACK_ABOVE` bytes, as
+a `flat` cell's), its final checkpoint's policy (with the lower layer it was
 trained with) and one `eval_n<N>.json` per evaluated population; done cells
 are skipped, so the committed results are the plan's memory across sessions.
 A cell whose run directory (`--runs`/<cell>/) has a checkpoint continues
@@ -243,7 +244,7 @@ class Status:
 def is_done(cell: paper_plan.Cell, args: PaperArgs) -> bool:
   """Whether the cell's results are all in `--results`."""
   folder = results_directory(cell, args)
-  return os.path.exists(os.path.join(folder, 'metrics.csv')) and all(
+  return run_dir.has_metrics(folder) and all(
       os.path.exists(os.path.join(folder, EVAL_FILE.format(n)))
       for n in cell.populations)
 
@@ -317,7 +318,7 @@ def measured_pace(cell: paper_plan.Cell, args: PaperArgs
   without a fresh metrics.csv holding 3 rows in that window."""
   logdir = run_directory(cell, args)
   try:
-    if time.time() - os.path.getmtime(os.path.join(logdir, 'metrics.csv')
+    if time.time() - os.path.getmtime(os.path.join(logdir, run_dir.METRICS)
                                       ) > PACE_WINDOW:
       return None
     rows = run_dir.read_metrics(logdir)
@@ -430,13 +431,13 @@ def publish(cell: paper_plan.Cell, checkpoint: str,
 def _copy_run(logdir: str, checkpoint: str, final: str,
               extra: Optional[dict[str, Callable[[str], None]]] = None,
               policy_only: bool = False):
-  """Writes `final` whole or not at all: `logdir`'s metrics.csv and lower
-  layer and the one `checkpoint` (a run directory that coop-train can
+  """Writes `final` whole or not at all: `logdir`'s metrics.csv (gzipped
+  when large, `run_dir.pack_metrics`) and lower layer and the one
+  `checkpoint` (a run directory that coop-train can
   resume; with `policy_only`, its policy, `checkpoints.write_policy`, if
   its layout allows, else whole), plus {file name: writer(path)} of
   `extra`."""
   from runners import checkpoints  # pylint: disable=g-import-not-at-top
-  from runners import run_dir  # pylint: disable=g-import-not-at-top
   parent = os.path.dirname(final)
   os.makedirs(parent, exist_ok=True)
   # Only `final`'s leftovers: its cell's claim (`claim`) makes this the
@@ -445,7 +446,8 @@ def _copy_run(logdir: str, checkpoint: str, final: str,
   tmp = f'{final}.tmp-{os.getpid()}'
   shutil.rmtree(tmp, ignore_errors=True)
   os.makedirs(os.path.join(tmp, 'checkpoints'))
-  shutil.copy2(os.path.join(logdir, 'metrics.csv'), tmp)
+  shutil.copy2(os.path.join(logdir, run_dir.METRICS), tmp)
+  run_dir.pack_metrics(tmp)  # Committed files stay under 5 MB.
   if policy_only and checkpoints.policy_writable(checkpoint):
     checkpoints.write_policy(checkpoint, tmp)
   else:
@@ -484,6 +486,7 @@ def unstash(cell: paper_plan.Cell, args: PaperArgs) -> bool:
       or not checkpoints.list_checkpoints(folder)):
     return False
   shutil.copytree(folder, logdir, dirs_exist_ok=True)
+  run_dir.unpack_metrics(logdir)
   return True
 
 
@@ -525,7 +528,7 @@ def _passed_over_for_stages(cell: paper_plan.Cell, elsewhere: dict,
   waits = [os.path.basename(folder)
            for _, folder in stage_directories(cell, args)
            if folder in elsewhere
-           and not os.path.exists(os.path.join(folder, 'metrics.csv'))]
+           and not run_dir.has_metrics(folder)]
   if waits:
     log(f'{cell.path}: starts from {", ".join(waits)}, which another '
         'coop-paper runs; passed over')
@@ -554,7 +557,7 @@ def run_cell(cell: paper_plan.Cell, args: PaperArgs,
     if state.state == 'todo':
       missing = [os.path.basename(folder)
                  for _, folder in stage_directories(cell, args)
-                 if not os.path.exists(os.path.join(folder, 'metrics.csv'))]
+                 if not run_dir.has_metrics(folder)]
       if missing:
         raise ValueError(f'{cell.name} starts from {missing}, which are not '
                          f'in {args.results} yet: run them first (--only).')

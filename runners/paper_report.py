@@ -169,8 +169,7 @@ def figures(args: paper.PaperArgs, plan, directory: str
     side by side, so its joint run alone)."""
     path = paper.results_directory(cell, args)
     stages = paper.stage_directories(cell, args)
-    if len(stages) == 1 and os.path.exists(
-        os.path.join(stages[0][1], 'metrics.csv')):
+    if len(stages) == 1 and run_dir.has_metrics(stages[0][1]):
       return plot.STAGES.join([stages[0][1], path])
     return path
   done = lambda cells: [curve(c) for c in cells if paper.is_done(c, args)]
@@ -386,7 +385,7 @@ def _training_return(cells, args) -> str:
   values = []
   for cell in cells:
     folder = paper.results_directory(cell, args)
-    if os.path.exists(os.path.join(folder, 'metrics.csv')):
+    if run_dir.has_metrics(folder):
       rows = [r for r in run_dir.read_metrics(folder) if 'return' in r]
       if rows:
         values.append(rows[-1]['return'])

@@ -206,7 +206,7 @@ def success_by_start(panels: Mapping[str, tuple], xlabel, ylabel, out,
     sx, sy, share = starts_and_shares(x, y, success)
     points = ax.scatter(sx, sy, c=share, s=16, cmap="RdYlGn", vmin=0.0,
                         vmax=1.0, edgecolors="black", linewidths=0.3)
-    ax.set_title(f"{label.replace('`', '')}: {100 * won.mean():.0f}% of "
+    ax.set_title(f"{label.replace('`', '')}:\n{100 * won.mean():.0f}% of "
                  f"{len(won)} episodes, {len(sx)} starts", fontsize=9)
     ax.set_xlabel(xlabel)
     ax.grid(alpha=0.3)

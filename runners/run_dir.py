@@ -4,6 +4,8 @@ Shared by the runners so that every run directory looks the same:
 
   writer.lock                          held by the run's one writer (`RunLock`)
   metrics.csv, events.out.tfevents.*   one row per update (`MetricsLog`)
+  metrics.csv.gz                       instead of metrics.csv in a copy of a
+                                       run whose file is large (`pack_metrics`)
   checkpoints/<update>/                orbax checkpoints (`runners.checkpoints`)
 
 Every write survives a kill at any instant: files (`write_file`) and
@@ -23,6 +25,7 @@ import csv
 import errno
 import fcntl
 import glob
+import gzip
 import io
 import math
 import os
@@ -246,11 +249,62 @@ def _missing(value):
   return value is None or (isinstance(value, float) and math.isnan(value))
 
 
+METRICS = 'metrics.csv'
+"""A run's one row per update (`MetricsLog`)."""
+PACKED_METRICS = METRICS + '.gz'
+"""`METRICS` gzipped, in a copy of a run (`pack_metrics`)."""
+PACK_ABOVE = 4 * 2 ** 20
+"""Bytes of metrics.csv above which a copy keeps it gzipped: a `flat` run
+logs a row every 1,024 env steps, ~6 MB over 12M steps, and no committed
+file may pass 5 MB."""
+
+
+def metrics_path(logdir):
+  """`logdir`'s metrics.csv, or its `PACKED_METRICS` when that is what the
+  folder holds."""
+  path = os.path.join(logdir, METRICS)
+  packed = os.path.join(logdir, PACKED_METRICS)
+  return packed if not os.path.exists(path) and os.path.exists(packed) else path
+
+
+def has_metrics(logdir):
+  """Whether `logdir` holds a metrics.csv (plain or packed)."""
+  return os.path.exists(metrics_path(logdir))
+
+
+def pack_metrics(folder):
+  """Gzips `folder`'s metrics.csv (a copy of a run's, `runners.paper`'s
+  published and stashed runs) in place when it is over `PACK_ABOVE` bytes;
+  the same rows give the same bytes."""
+  path = os.path.join(folder, METRICS)
+  if os.path.getsize(path) <= PACK_ABOVE:
+    return
+  packed = io.BytesIO()
+  with open(path, 'rb') as f, gzip.GzipFile(
+      fileobj=packed, mode='wb', mtime=0, filename='') as out:
+    shutil.copyfileobj(f, out)
+  write_file(os.path.join(folder, PACKED_METRICS), packed.getvalue())
+  os.remove(path)
+
+
+def unpack_metrics(logdir):
+  """Makes a run directory copied from a packed copy (`pack_metrics`)
+  writable again: its metrics.csv from `PACKED_METRICS`, which goes."""
+  packed = os.path.join(logdir, PACKED_METRICS)
+  if os.path.exists(packed):
+    with gzip.open(packed, 'rb') as f:
+      write_file(os.path.join(logdir, METRICS), f.read())
+    os.remove(packed)
+
+
 def read_metrics(logdir):
-  """Rows of `logdir/metrics.csv` (`MetricsLog`'s) as dicts of floats, empty
-  and non-numeric cells dropped."""
+  """Rows of `logdir`'s metrics.csv (`MetricsLog`'s; plain or packed,
+  `metrics_path`) as dicts of floats, empty and non-numeric cells
+  dropped."""
   rows = []
-  with open(os.path.join(logdir, 'metrics.csv'), newline='') as f:
+  path = metrics_path(logdir)
+  with (gzip.open(path, 'rt', newline='') if path.endswith('.gz')
+        else open(path, newline='')) as f:
     for row in csv.DictReader(f):
       parsed = {}
       for key, value in row.items():
@@ -265,7 +319,7 @@ def read_metrics(logdir):
 def logged_row(logdir, update):
   """The metrics.csv row of `update` as {column: float} (`read_metrics`'s),
   or {} when there is none: what an export from a checkpoint reports."""
-  if not os.path.exists(os.path.join(logdir, 'metrics.csv')):
+  if not has_metrics(logdir):
     return {}
   return next((row for row in read_metrics(logdir)
                if row.get('update') == update), {})
@@ -281,7 +335,7 @@ class MetricsLog:
   """
 
   def __init__(self, logdir, columns, resume_update=None):
-    self._path = os.path.join(logdir, 'metrics.csv')
+    self._path = os.path.join(logdir, METRICS)
     self.columns = list(columns)
     rows = []
     if resume_update is not None and os.path.exists(self._path):

@@ -26,6 +26,7 @@ from runners import marl_eval
 from runners import paper
 from runners import paper_plan
 from runners import paper_report
+from runners import plot
 from runners import run_dir
 from tests.test_train import controller  # pylint: disable=unused-import
 from tests.test_train import STEPS
@@ -423,6 +424,48 @@ def test_the_plan_skips_done_cells_and_resumes_a_partial_one(
   monkeypatch.setattr(actor_pool, 'init_ray',
                       lambda *a, **k: pytest.fail('Ray started'))
   paper.run_plan(dataclasses.replace(args, actors=2), plan, log=pytest.fail)
+
+
+def test_a_large_metrics_csv_is_committed_gzipped_and_resumes_plain(
+    controller, tiny_run, tmp_path, monkeypatch):  # pylint: disable=redefined-outer-name
+  # A `flat` run's metrics.csv passes 5 MB; its stash and published copy
+  # keep it gzipped, read as the plain file, and a resume writes plain.
+  partial, done = _tiny_plan(controller)
+  args = _args(tmp_path)
+  logdir = paper.run_directory(partial, args)
+  shutil.copytree(tiny_run, logdir)
+  with open(os.path.join(logdir, 'metrics.csv'), 'rb') as f:
+    plain = f.read()
+  assert paper.stash(partial, args)  # Small: kept plain.
+  assert os.path.exists(os.path.join(paper.partial_directory(partial, args),
+                                     'metrics.csv'))
+  monkeypatch.setattr(run_dir, 'PACK_ABOVE', len(plain) - 1)
+  stashed = paper.stash(partial, args)
+  assert sorted(os.listdir(stashed)) == ['checkpoints', 'controller',
+                                         'metrics.csv.gz']
+  assert run_dir.read_metrics(stashed) == run_dir.read_metrics(logdir)
+  with open(os.path.join(stashed, 'metrics.csv.gz'), 'rb') as f:
+    packed = f.read()
+  assert paper.stash(partial, args) == stashed  # The same bytes again.
+  with open(os.path.join(stashed, 'metrics.csv.gz'), 'rb') as f:
+    assert f.read() == packed
+  shutil.rmtree(args.runs)
+  assert paper.unstash(partial, args)
+  assert sorted(os.listdir(logdir)) == ['checkpoints', 'controller',
+                                        'metrics.csv']
+  with open(os.path.join(logdir, 'metrics.csv'), 'rb') as f:
+    assert f.read() == plain
+  _commit(done, args, {2: [1, 0]})
+  paper.run_plan(args, [partial, done], log=lambda line: None)
+  folder = paper.results_directory(partial, args)
+  assert 'metrics.csv.gz' in os.listdir(folder)
+  assert 'metrics.csv' not in os.listdir(folder)
+  assert paper.is_done(partial, args)
+  assert [r['update'] for r in run_dir.read_metrics(folder)] == [1, 2]
+  assert [r['update'] for r in _rows(os.path.join(logdir, 'metrics.csv'))
+          ] == ['1', '2']
+  assert [r['update'] for r in plot._read_runs([folder], ['env_steps'])[0]
+          ] == [1, 2]
 
 
 def _plan_cells(*paths):
