@@ -141,7 +141,9 @@ class _StepInFlightFilter(logging.Filter):
 
   def filter(self, record: logging.LogRecord) -> bool:
     args = record.args if isinstance(record.args, tuple) else ()
-    if not args or not _in_flight(args[0]):
+    if not args or not isinstance(args[0], (str, os.PathLike)):
+      return True  # Not a path: any other line (a filter must not raise).
+    if not _in_flight(args[0]):
       return True
     if record.msg == self._MISSING:
       return False

@@ -354,6 +354,9 @@ def test_orbax_reading_its_step_in_flight_is_not_logged(tmp_path, caplog):
     open(missing, 'w').close()  # Created, not yet written.
     assert store.read(missing) is None
     assert caplog.records == []
+    logging.getLogger('absl').warning('step %d of %s', 5, 'x')  # Any other.
+    assert [r.getMessage() for r in caplog.records] == ['step 5 of x']
+    caplog.clear()
     assert store.read(committed) is None
     os.makedirs(os.path.dirname(committed))
     open(committed, 'w').close()
