@@ -68,6 +68,7 @@ setuptools.setup(
             "coop-train=runners.train:main",
             "coop-eval=runners.evaluate:main",
             "coop-paper=runners.paper:main",
+            "coop-compare=runners.compare:main",
         ],
     },
 )

@@ -132,6 +132,18 @@ def check(data: Any) -> None:
       fail([env], f'runs have different numbers of steps: {steps_per_run}')
 
 
+def models(data: dict[str, Any]) -> list[tuple[str, dict[str, list[float]]]]:
+  """Each run of the marl-eval dict `data` as `(label, metrics)`, in the
+  file's order: the label `<task>/<algorithm>/<run>` (`transport_n4/hrl/
+  seed_0`), the metrics its `absolute_metrics` lists, one value per
+  episode. `data` may also be a `coop-paper` eval JSON, which holds the
+  marl-eval dict under 'marl_eval'."""
+  data = data.get('marl_eval', data) if isinstance(data, dict) else data
+  check(data)
+  return [('/'.join(name), steps[ABSOLUTE])
+          for tasks in data.values() for name, steps in _runs(tasks)]
+
+
 def _levels(env, tasks):
   yield 'task', [env], tasks
   for task, algorithms in (tasks.items() if isinstance(tasks, dict) else ()):

@@ -16,6 +16,7 @@ from typing import Any, Optional
 
 from runners import baselines
 from runners import evaluate
+from runners import marl_eval
 from runners import paper
 from runners import paper_plan
 from runners import run_dir
@@ -48,15 +49,8 @@ def _evaluation_in(folder: str, n_agents: int) -> Optional[dict[str, Any]]:
 
 def _episodes(evaluation: dict[str, Any], metric: str) -> list[float]:
   """Per-episode values of `metric` from an eval JSON's marl-eval runs."""
-  values = []
-  for tasks in evaluation['marl_eval'].values():
-    for algorithms in tasks.values():
-      for runs in algorithms.values():
-        for steps in runs.values():
-          for step, entry in steps.items():
-            if step.startswith('step_'):
-              values += entry[metric]
-  return values
+  return [value for _, metrics in marl_eval.models(evaluation)
+          for value in metrics[metric]]
 
 
 def summarize(cells, n_agents: int, args: paper.PaperArgs

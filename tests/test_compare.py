@@ -1,0 +1,124 @@
+"""`coop-compare`: two models on the same episodes, paired (exact McNemar)."""
+import json
+import math
+
+import pytest
+
+from runners import compare
+from runners import marl_eval
+
+
+def _model(success, agent='hrl', seed=0, task='transport', n_agents=4,
+           starts=None, **figures):
+  episodes = []
+  for i, s in enumerate(success):
+    episode = {'success': float(s), 'return': 100.0 * s + i}
+    if starts is not None:
+      episode['start_agent_cylinder'] = starts[i]
+    episode.update({k: v[i] for k, v in figures.items()})
+    episodes.append(episode)
+  return {'task': task, 'n_agents': n_agents, 'stage': '', 'agent': agent,
+          'seed': seed, 'update': 7, 'env_steps': 700, 'episodes': episodes}
+
+
+def _write(path, *models, paper=None):
+  data = marl_eval.layout(models)
+  if paper is not None:  # a `coop-paper` eval JSON wraps the layout
+    data = dict(paper, marl_eval=data)
+  path.write_text(json.dumps(data))
+  return str(path)
+
+
+def _binomial_p(b, c):
+  """Two-sided exact binomial p at 1/2 by its definition: the probability
+  of every split no more likely than the one seen."""
+  n = b + c
+  probs = [math.comb(n, k) / 2 ** n for k in range(n + 1)]
+  return min(1.0, sum(p for p in probs if p <= probs[b] * (1 + 1e-12)))
+
+
+@pytest.mark.parametrize('b,c', [(30, 18), (41, 12), (0, 5), (3, 3), (1, 0),
+                                 (13, 26), (0, 0)])
+def test_mcnemar_p_is_the_exact_two_sided_binomial_test(b, c):
+  expected = 1.0 if b + c == 0 else _binomial_p(b, c)
+  assert compare.mcnemar_p(b, c) == pytest.approx(expected, rel=1e-9)
+  assert compare.mcnemar_p(b, c) == compare.mcnemar_p(c, b)
+
+
+def test_mcnemar_p_known_values():
+  assert compare.mcnemar_p(5, 0) == pytest.approx(0.0625)
+  assert compare.mcnemar_p(30, 18) == pytest.approx(0.11140289106101878)
+  with pytest.raises(ValueError):
+    compare.mcnemar_p(-1, 3)
+
+
+def test_counts_the_discordant_episodes(tmp_path, capsys):
+  starts = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]
+  ref = _write(tmp_path / 'a.json', _model([1, 1, 1, 0, 0, 1], starts=starts))
+  other = _write(tmp_path / 'b.json',
+                 _model([1, 0, 0, 0, 1, 0], agent='flat', starts=starts),
+                 _model([1, 1, 1, 0, 0, 1], agent='flat', seed=1,
+                        starts=starts))
+  compare.main(['--evaluations', ref, other])
+  out = capsys.readouterr().out
+  assert f'reference: {ref}: success 4 of 6 episodes' in out
+  rows = [line.split() for line in out.splitlines()[2:]]
+  # success, both, reference only, model only: 2 of 6, 1 / 3 / 1; then the
+  # second model wins exactly the reference's episodes.
+  assert rows[0][-7:-1] == ['2', 'of', '6', '1', '3', '1']
+  assert float(rows[0][-1]) == pytest.approx(compare.mcnemar_p(3, 1),
+                                             rel=1e-3)
+  assert rows[1][-4:] == ['4', '0', '0', '1']
+  assert 'transport_n4/flat/seed_1' in out.splitlines()[3]
+
+
+def test_a_coop_paper_cell_folder_reads_its_trained_population(tmp_path):
+  cell = tmp_path / 'transport_hrl_n4_s0'
+  cell.mkdir()
+  for n in (2, 4, 5):
+    _write(cell / f'eval_n{n}.json',
+           _model([1, 0, 1] if n == 4 else [0, 0, 0], n_agents=n),
+           paper={'n_agents': n, 'trained_n_agents': 4})
+  other = _write(tmp_path / 'b.json', _model([0, 0, 1], agent='flat'))
+  out = compare.compare(compare.CompareArgs(evaluations=(str(cell), other)))
+  assert out['reference'].endswith('eval_n4.json')
+  assert out['reference_wins'] == 2
+  assert out['models'][0]['reference_only'] == 1
+
+
+@pytest.mark.parametrize('case,message', [
+    ('episodes', 'not the same episodes'),
+    ('starts', 'start_agent_cylinder of episode 1'),
+    ('task', 'evaluated on transport_n5'),
+    ('metric', 'not 0 / 1'),
+    ('missing', "no episode figure 'reached'"),
+    ('one', 'name two or more'),
+])
+def test_unpairable_evaluations_are_errors(tmp_path, capsys, case, message):
+  ref = _write(tmp_path / 'a.json', _model([1, 0, 1], starts=[1., 2., 3.]))
+  other = {
+      'episodes': _model([1, 0, 1, 1]),
+      'starts': _model([1, 0, 1], starts=[1., 2.5, 3.]),
+      'task': _model([1, 0, 1], n_agents=5),
+      'metric': _model([1, 0, 1]),
+      'missing': _model([1, 0, 1]),
+      'one': None,
+  }[case]
+  paths = [ref] if other is None else [
+      ref, _write(tmp_path / 'b.json', other)]
+  metric = {'metric': ['--metric', 'return'],
+            'missing': ['--metric', 'reached']}.get(case, [])
+  with pytest.raises(SystemExit) as exit_info:
+    compare.main(['--evaluations', *paths, *metric])
+  assert exit_info.value.code == 2
+  err = capsys.readouterr().err
+  assert err.startswith('coop-compare: error:') and message in err
+
+
+def test_missing_and_broken_files_are_errors(tmp_path):
+  with pytest.raises(FileNotFoundError):
+    compare.load([str(tmp_path / 'none.json')])
+  broken = tmp_path / 'broken.json'
+  broken.write_text('{"coop_suite": {"transport_n4": {}}}')
+  with pytest.raises(ValueError, match='broken.json: marl-eval layout'):
+    compare.load([str(broken)])
