@@ -19,6 +19,13 @@ push stage and the joint run started from it:
 
     python -m runners.plot results/paper/transport_hrl_push_n4_s0+results/paper/transport_hrl_n4_s0 \
         --columns success --out docs/images/transport_curriculum_s0.png
+
+`--windows` prints the numbers that docs/results.md quotes as "training
+windows": per run and column, the mean of the logged values over each
+stretch of environment steps, the largest value (its "best") and the last:
+
+    python -m runners.plot results/paper/transport_no_memory_n4_s1 \
+        --columns success --windows 0 1 3 6 12
 """
 
 import dataclasses
@@ -43,18 +50,29 @@ class PlotArgs:
   runs: Annotated[tuple[str, ...], tyro.conf.Positional]
   """Run directories (or published results), each with a metrics.csv;
   `A+B`: run B continuing run A, one curve."""
-  out: str
-  """The PNG to write."""
+  out: str = ""
+  """The PNG to write (needed unless --windows is given)."""
   columns: tuple[str, ...] = ("return", "success")
   """metrics.csv columns, one panel each."""
   title: str = ""
   """Figure title; default: the runs' names and wall time."""
+  windows: tuple[float, ...] = ()
+  """Edges in millions of env steps, e.g. `0 1 3 6 12`: also print, per
+  run and column, the mean of the logged values in each window (a, b]
+  (for `success`, each value is itself a window of the last episodes),
+  the largest value and the last."""
 
   def __post_init__(self):
     if not self.runs:
       raise ValueError("Give at least one run directory.")
     if not self.columns:
       raise ValueError("--columns must name at least one column.")
+    if not self.out and not self.windows:
+      raise ValueError("--out: name the PNG to write (or give --windows).")
+    if len(self.windows) == 1 or any(
+        b <= a for a, b in zip(self.windows, self.windows[1:])):
+      raise ValueError(f"--windows: two or more increasing edges, got "
+                       f"{list(self.windows)}.")
 
 
 STAGES = "+"
@@ -173,6 +191,45 @@ def plot(runs: Union[str, Sequence[str]], columns, out, title=None):
   _save(fig, out)
 
 
+def window_means(rows, column, edges):
+  """[(a, b, mean, count)] of `column` over the rows whose env steps lie in
+  each window (a, b] of `edges` (env steps); mean is nan for an empty one."""
+  steps, values = _curve(rows, column)
+  out = []
+  for a, b in zip(edges, edges[1:]):
+    inside = values[(steps > a) & (steps <= b)]
+    out.append((a, b, float(inside.mean()) if len(inside) else float("nan"),
+                len(inside)))
+  return out
+
+
+def _number(x: float) -> str:
+  """Two decimals as docs/results.md quotes success; 3 digits for small or
+  large figures (a KL of 0.011, a return of 5,835)."""
+  if abs(x) >= 100:
+    return f"{x:,.0f}"
+  return f"{x:.2f}" if abs(x) >= 0.1 else f"{x:.3g}"
+
+
+def windows_text(runs, columns, edges_millions) -> str:
+  """`window_means` of every run and column as text, one line each, with
+  the column's largest value (and its env steps) and its last."""
+  edges = [e * 1e6 for e in edges_millions]
+  lines = []
+  for run, rows in zip(runs, _read_runs(runs, columns)):
+    lines.append(f"{run} ({rows[-1].get('env_steps', 0) / 1e6:.2f}M env "
+                 f"steps, {rows[-1].get('wall_time', 0.0):,.0f} s)")
+    for column in columns:
+      steps, values = _curve(rows, column)
+      cells = [f"{a / 1e6:g}-{b / 1e6:g}M {_number(m)} ({n})"
+               for a, b, m, n in window_means(rows, column, edges)]
+      top = int(np.argmax(values))
+      lines.append(f"  {column}: {', '.join(cells)}; max "
+                   f"{_number(values[top])} at {steps[top] / 1e6:.2f}M, "
+                   f"last {_number(values[-1])}")
+  return "\n".join(lines)
+
+
 def succeeded(success):
   """Each episode's success (a 0/1 or boolean value per episode) as bools."""
   return np.asarray(success, np.float64) > 0.5
@@ -236,11 +293,21 @@ def plot_groups(groups: Mapping[str, Sequence[str]], columns, out, title):
   _save(fig, out)
 
 
+def _work(args):
+  text = (windows_text(args.runs, args.columns, args.windows)
+          if args.windows else "")
+  if args.out:
+    plot(args.runs, args.columns, args.out, args.title or None)
+  return text
+
+
 def main(argv=None):
-  args, _ = cli.run(
-      PlotArgs, lambda a: plot(a.runs, a.columns, a.out, a.title or None),
-      argv, "python -m runners.plot", __doc__.splitlines()[0])
-  print(f"wrote {args.out}")
+  args, text = cli.run(PlotArgs, _work, argv, "python -m runners.plot",
+                       __doc__.splitlines()[0])
+  if text:
+    print(text)
+  if args.out:
+    print(f"wrote {args.out}")
 
 
 if __name__ == "__main__":

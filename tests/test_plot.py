@@ -81,3 +81,23 @@ def test_success_by_start_gives_each_start_its_models_share(tmp_path):
                          "one model": (x[:3], y[:3], success[:3])},
                         "x", "y", str(out), "by start")
   assert imageio.v2.imread(out).ndim == 3
+
+
+def test_windows_print_the_mean_of_each_stretch_of_env_steps(tmp_path,
+                                                              capsys):
+  run = _run(tmp_path / "run", [(500_000, 1.0, 0.0), (1_000_000, 2.0, 0.2),
+                                (1_500_000, 3.0, 0.6), (2_000_000, 4.0, 0.4),
+                                (3_000_000, 5.0, 0.3)])
+  rows = run_dir.read_metrics(run)
+  assert plot.window_means(rows, "success", [0, 1e6, 2e6, 2.5e6]) == [
+      (0, 1e6, pytest.approx(0.1), 2), (1e6, 2e6, pytest.approx(0.5), 2),
+      (2e6, 2.5e6, pytest.approx(float("nan"), nan_ok=True), 0)]
+  plot.main([run, "--columns", "success", "--windows", "0", "1", "3"])
+  out = capsys.readouterr().out
+  assert "success: 0-1M 0.10 (2), 1-3M 0.43 (3); max 0.60 at 1.50M, " \
+         "last 0.30" in out
+  assert "wrote" not in out  # no --out: no PNG
+  for bad in (["--windows", "1"], ["--windows", "0", "3", "2"], []):
+    with pytest.raises(SystemExit):
+      plot.main([run, *bad])
+  assert "--out" in capsys.readouterr().err
