@@ -32,7 +32,7 @@ import glob
 import json
 import math
 import os
-from typing import NamedTuple
+from typing import NamedTuple, Optional
 
 from runners import cli
 from runners import marl_eval
@@ -62,10 +62,32 @@ def mcnemar_p(only_a: int, only_b: int) -> float:
     raise ValueError(f'discordant counts must be >= 0, got {only_a}, '
                      f'{only_b}')
   n = only_a + only_b
-  if n == 0:
-    return 1.0
-  tail = sum(math.comb(n, k) for k in range(min(only_a, only_b) + 1))
+  term = tail = 1  # C(n, 0), then C(n, k) for k up to min(only_a, only_b)
+  for k in range(1, min(only_a, only_b) + 1):
+    term = term * (n - k + 1) // k
+    tail += term
   return min(1.0, 2 * tail / 2 ** n)
+
+
+def _read(path: str) -> dict:
+  """The JSON object in the file `path`; anything else is an error that
+  names the file."""
+  with open(path) as f:
+    try:
+      data = json.load(f)
+    except json.JSONDecodeError as e:
+      raise ValueError(f'{path}: not JSON ({e})') from None
+  if not isinstance(data, dict):
+    raise ValueError(f'{path}: not an evaluation (a JSON object), got a '
+                     f'{type(data).__name__}')
+  return data
+
+
+def _trained_population(data: dict) -> bool:
+  """Whether an evaluation plays its model's training population (a
+  `coop-paper` eval JSON says so; a file that does not say passes)."""
+  n, trained = data.get('n_agents'), data.get('trained_n_agents')
+  return n is None or trained is None or n == trained
 
 
 def evaluation_file(path: str) -> str:
@@ -76,27 +98,26 @@ def evaluation_file(path: str) -> str:
     if not os.path.exists(path):
       raise FileNotFoundError(f'no evaluation at {path}')
     return path
-  found = sorted(glob.glob(os.path.join(path, 'eval_n*.json')))
-  if len(found) > 1:
-    found = [f for f in found if _trained_population(f)]
+  from runners import paper  # pylint: disable=g-import-not-at-top
+  candidates = sorted(glob.glob(os.path.join(path,
+                                             paper.EVAL_FILE.format('*'))))
+  found = [f for f in candidates if _trained_population(_read(f))]
   if len(found) != 1:
-    raise ValueError(f'{path}: no single eval_n<N>.json of the trained '
-                     'population in the folder; name the file')
+    names = [os.path.basename(f) for f in candidates]
+    raise ValueError(f'{path}: {len(found)} of its evaluation files '
+                     f'{names} play the trained population; name the file')
   return found[0]
-
-
-def _trained_population(path: str) -> bool:
-  with open(path) as f:
-    data = json.load(f)
-  return data.get('n_agents') == data.get('trained_n_agents') is not None
 
 
 class Model(NamedTuple):
   """One evaluated model: `label` names it, `task` is the evaluated task
-  and population (`transport_n4`), `metrics` its per-episode figures."""
+  and population (`transport_n4`), `metrics` its per-episode figures,
+  `eval_seed` the evaluation's first seed where the file records it (a
+  `coop-paper` eval JSON), else None."""
   label: str
   task: str
   metrics: dict[str, list[float]]
+  eval_seed: Optional[int] = None
 
 
 def load(paths) -> list[Model]:
@@ -106,22 +127,19 @@ def load(paths) -> list[Model]:
   models = []
   for path in paths:
     path = evaluation_file(path)
-    with open(path) as f:
-      try:
-        data = json.load(f)
-      except json.JSONDecodeError as e:
-        raise ValueError(f'{path}: not JSON ({e})') from None
+    data = _read(path)
     try:
       runs = marl_eval.models(data)
     except ValueError as e:
       raise ValueError(f'{path}: {e}') from None
     for name, metrics in runs:
       models.append(Model(f'{path} [{name}]' if len(runs) > 1 else path,
-                          name.split('/')[0], metrics))
+                          name.split('/')[0], metrics, data.get('eval_seed')))
   return models
 
 
 def _outcomes(model: Model, metric: str) -> list[bool]:
+  """`model`'s episodes won (True) and lost on the 0 / 1 figure `metric`."""
   if metric not in model.metrics:
     raise ValueError(f'{model.label}: no episode figure {metric!r} (it has '
                      f'{sorted(model.metrics)})')
@@ -133,18 +151,31 @@ def _outcomes(model: Model, metric: str) -> list[bool]:
 
 
 def _check_paired(reference: Model, other: Model) -> None:
+  """Raises ValueError unless `other` played the reference's episodes as
+  far as the files tell: the same task and population, the same recorded
+  evaluation seed, the same recorded starts."""
+  def fail(why, hint=' (evaluate both with the same --seeds and --envs)'):
+    raise ValueError(f'{other.label}: {why}: not the same episodes{hint}')
+
+  def starts(model):
+    return sorted(k for k in model.metrics if k.startswith(START_PREFIX))
+
   if other.task != reference.task:
-    raise ValueError(f'{other.label}: evaluated on {other.task}, the '
-                     f'reference on {reference.task}: not the same episodes')
-  for key in sorted(k for k in reference.metrics
-                    if k.startswith(START_PREFIX) and k in other.metrics):
+    fail(f'evaluated on {other.task}, the reference on {reference.task}',
+         hint='')
+  if None not in (reference.eval_seed, other.eval_seed) and (
+      other.eval_seed != reference.eval_seed):
+    fail(f'evaluation seed {other.eval_seed}, the reference\'s '
+         f'{reference.eval_seed}')
+  if starts(other) != starts(reference):
+    fail(f'records the starts {starts(other)}, the reference '
+         f'{starts(reference)}')
+  for key in starts(reference):
     pairs = zip(reference.metrics[key], other.metrics[key])
     for episode, (a, b) in enumerate(pairs):
-      if abs(a - b) > START_TOLERANCE:
-        raise ValueError(
-            f'{other.label}: {key} of episode {episode} is {b:.3f}, the '
-            f"reference's {a:.3f}: not the same episodes (evaluate both "
-            'with the same --seeds and --envs)')
+      if not abs(a - b) <= START_TOLERANCE:  # NaN differs too
+        fail(f"{key} of episode {episode} is {b:.3f}, the reference's "
+             f'{a:.3f}')
 
 
 def compare(args: CompareArgs) -> dict:
@@ -182,9 +213,11 @@ def table(out: dict) -> str:
             str(r['reference_only']), str(r['model_only']), f'{r["p"]:.3g}')
            for r in out['models']]
   widths = [max(len(row[i]) for row in [head] + lines) for i in range(6)]
-  fmt = lambda row: '  '.join(
-      c.ljust(w) if i == 0 else c.rjust(w)
-      for i, (c, w) in enumerate(zip(row, widths)))
+
+  def fmt(row):
+    return '  '.join(c.ljust(w) if i == 0 else c.rjust(w)
+                     for i, (c, w) in enumerate(zip(row, widths)))
+
   return '\n'.join(
       [f'reference: {out["reference"]}: {out["metric"]} '
        f'{out["reference_wins"]} of {n} episodes', fmt(head)]

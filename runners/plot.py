@@ -192,9 +192,11 @@ def plot(runs: Union[str, Sequence[str]], columns, out, title=None):
 
 
 def window_means(rows, column, edges):
-  """[(a, b, mean, count)] of `column` over the rows whose env steps lie in
-  each window (a, b] of `edges` (env steps); mean is nan for an empty one."""
+  """[(a, b, mean, count)] of `column`'s finite values over the rows whose
+  env steps lie in each window (a, b] of `edges` (env steps); mean is nan
+  for an empty window."""
   steps, values = _curve(rows, column)
+  steps, values = steps[np.isfinite(values)], values[np.isfinite(values)]
   out = []
   for a, b in zip(edges, edges[1:]):
     inside = values[(steps > a) & (steps <= b)]
@@ -214,13 +216,17 @@ def _number(x: float) -> str:
 def windows_text(runs, columns, edges_millions) -> str:
   """`window_means` of every run and column as text, one line each, with
   the column's largest value (and its env steps) and its last."""
-  edges = [e * 1e6 for e in edges_millions]
+  edges = [round(e * 1e6) for e in edges_millions]
   lines = []
   for run, rows in zip(runs, _read_runs(runs, columns)):
     lines.append(f"{run} ({rows[-1].get('env_steps', 0) / 1e6:.2f}M env "
                  f"steps, {rows[-1].get('wall_time', 0.0):,.0f} s)")
     for column in columns:
       steps, values = _curve(rows, column)
+      steps, values = steps[np.isfinite(values)], values[np.isfinite(values)]
+      if not len(values):
+        lines.append(f"  {column}: no finite value")
+        continue
       cells = [f"{a / 1e6:g}-{b / 1e6:g}M {_number(m)} ({n})"
                for a, b, m, n in window_means(rows, column, edges)]
       top = int(np.argmax(values))

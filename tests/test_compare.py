@@ -86,26 +86,52 @@ def test_a_coop_paper_cell_folder_reads_its_trained_population(tmp_path):
   assert out['models'][0]['reference_only'] == 1
 
 
+def test_a_cell_folder_without_its_trained_population_is_an_error(tmp_path):
+  cell = tmp_path / 'transport_hrl_n4_s0'
+  cell.mkdir()
+  _write(cell / 'eval_n5.json', _model([1, 0, 1], n_agents=5),
+         paper={'n_agents': 5, 'trained_n_agents': 4})
+  with pytest.raises(ValueError, match=r"0 of its evaluation files "
+                     r"\['eval_n5.json'\] play the trained population"):
+    compare.evaluation_file(str(cell))
+  (cell / 'eval_n4.json').write_text('[1, 2]')
+  with pytest.raises(ValueError, match='eval_n4.json: not an evaluation'):
+    compare.evaluation_file(str(cell))
+  (cell / 'eval_n4.json').write_text('{"n_agents": 4,')
+  with pytest.raises(ValueError, match='eval_n4.json: not JSON'):
+    compare.evaluation_file(str(cell))
+
+
 @pytest.mark.parametrize('case,message', [
     ('episodes', 'not the same episodes'),
     ('starts', 'start_agent_cylinder of episode 1'),
+    ('nan_start', 'start_agent_cylinder of episode 2 is nan'),
+    ('no_starts', "records the starts [], the reference "
+                  "['start_agent_cylinder']"),
+    ('eval_seed', "evaluation seed 7, the reference's 1000"),
     ('task', 'evaluated on transport_n5'),
     ('metric', 'not 0 / 1'),
     ('missing', "no episode figure 'reached'"),
     ('one', 'name two or more'),
 ])
 def test_unpairable_evaluations_are_errors(tmp_path, capsys, case, message):
-  ref = _write(tmp_path / 'a.json', _model([1, 0, 1], starts=[1., 2., 3.]))
+  starts = [1., 2., 3.]
+  ref = _write(tmp_path / 'a.json', _model([1, 0, 1], starts=starts),
+               paper={'eval_seed': 1000})
   other = {
-      'episodes': _model([1, 0, 1, 1]),
+      'episodes': _model([1, 0, 1, 1], starts=starts + [4.]),
       'starts': _model([1, 0, 1], starts=[1., 2.5, 3.]),
-      'task': _model([1, 0, 1], n_agents=5),
-      'metric': _model([1, 0, 1]),
-      'missing': _model([1, 0, 1]),
+      'nan_start': _model([1, 0, 1], starts=[1., 2., float('nan')]),
+      'no_starts': _model([1, 0, 1]),
+      'eval_seed': _model([1, 0, 1], starts=starts),
+      'task': _model([1, 0, 1], n_agents=5, starts=starts),
+      'metric': _model([1, 0, 1], starts=starts),
+      'missing': _model([1, 0, 1], starts=starts),
       'one': None,
   }[case]
   paths = [ref] if other is None else [
-      ref, _write(tmp_path / 'b.json', other)]
+      ref, _write(tmp_path / 'b.json', other,
+                  paper={'eval_seed': 7 if case == 'eval_seed' else 1000})]
   metric = {'metric': ['--metric', 'return'],
             'missing': ['--metric', 'reached']}.get(case, [])
   with pytest.raises(SystemExit) as exit_info:

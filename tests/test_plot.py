@@ -97,7 +97,17 @@ def test_windows_print_the_mean_of_each_stretch_of_env_steps(tmp_path,
   assert "success: 0-1M 0.10 (2), 1-3M 0.43 (3); max 0.60 at 1.50M, " \
          "last 0.30" in out
   assert "wrote" not in out  # no --out: no PNG
-  for bad in (["--windows", "1"], ["--windows", "0", "3", "2"], []):
+  for bad, message in ((["--windows", "1"], "two or more increasing edges"),
+                       (["--windows", "0", "3", "2"], "increasing edges"),
+                       ([], "--out: name the PNG")):
     with pytest.raises(SystemExit):
       plot.main([run, *bad])
-  assert "--out" in capsys.readouterr().err
+    assert message in capsys.readouterr().err
+
+
+def test_windows_leave_out_values_that_are_not_numbers(tmp_path, capsys):
+  run = _run(tmp_path / "run", [(1_000_000, 1.0, 0.2), (2_000_000, 2.0, "nan"),
+                                (3_000_000, 3.0, 0.4)])
+  plot.main([run, "--columns", "success", "--windows", "0", "3"])
+  assert "success: 0-3M 0.30 (2); max 0.40 at 3.00M, last 0.40" in (
+      capsys.readouterr().out)
