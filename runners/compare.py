@@ -17,20 +17,21 @@ sensitive than comparing two success rates with their standard errors,
 because the episodes' shared difficulty cancels.
 
 `--evaluations` takes `coop-eval --json` files, `coop-paper` eval JSONs
-(`results/paper/<cell>/eval_n<N>.json`) or a cell's folder holding one. A
+(`results/paper/<cell>/eval_n<N>.json`) or a cell's folder (its trained
+population's file). A
 file with several models (`coop-eval` with several `--checkpoint`s) gives
 one model per run. The first model is the reference; every other one is
 compared with it, on a 0 / 1 episode figure (`--metric`, default `success`).
 The models must be of one evaluated task and population, with as many
-episodes, and where the task records its starts (transport's
-`start_agent_cylinder`, `start_cylinder_target`) the starts must agree
-episode by episode: otherwise the pairing would be meaningless, and that is
-an error, not a warning.
+episodes and, where the files record it, the same evaluation seed; where
+the task records its starts (transport's `start_agent_cylinder`,
+`start_cylinder_target`) the starts must agree episode by episode:
+otherwise the pairing would be meaningless, and that is an error, not a
+warning.
 """
 import dataclasses
 import glob
 import json
-import math
 import os
 from typing import NamedTuple, Optional
 
