@@ -91,18 +91,19 @@ def _trained_population(data: dict) -> bool:
   return n is None or trained is None or n == trained
 
 
-def evaluation_file(path: str) -> str:
-  """`path` itself, or the eval_n<N>.json of a `coop-paper` cell folder
-  `path` at the population it was trained with (its zero-shot ones are
-  named by file)."""
+def read_evaluation(path: str) -> tuple[str, dict]:
+  """(file, its JSON) of the evaluation `path`: the file itself, or the
+  eval_n<N>.json of a `coop-paper` cell folder `path` at the population it
+  was trained with (its zero-shot ones are named by file)."""
   if not os.path.isdir(path):
     if not os.path.exists(path):
       raise FileNotFoundError(f'no evaluation at {path}')
-    return path
+    return path, _read(path)
   from runners import paper  # pylint: disable=g-import-not-at-top
   candidates = sorted(glob.glob(os.path.join(path,
                                              paper.EVAL_FILE.format('*'))))
-  found = [f for f in candidates if _trained_population(_read(f))]
+  found = [(f, data) for f, data in ((f, _read(f)) for f in candidates)
+           if _trained_population(data)]
   if len(found) != 1:
     names = [os.path.basename(f) for f in candidates]
     raise ValueError(f'{path}: {len(found)} of its evaluation files '
@@ -127,8 +128,7 @@ def load(paths) -> list[Model]:
   [<task>/<algorithm>/<run>]`)."""
   models = []
   for path in paths:
-    path = evaluation_file(path)
-    data = _read(path)
+    path, data = read_evaluation(path)
     try:
       runs = marl_eval.models(data)
     except ValueError as e:

@@ -191,12 +191,18 @@ def plot(runs: Union[str, Sequence[str]], columns, out, title=None):
   _save(fig, out)
 
 
+def _finite_curve(rows, column):
+  """`_curve` without its values that are not finite numbers (NaN)."""
+  steps, values = _curve(rows, column)
+  finite = np.isfinite(values)
+  return steps[finite], values[finite]
+
+
 def window_means(rows, column, edges):
   """[(a, b, mean, count)] of `column`'s finite values over the rows whose
   env steps lie in each window (a, b] of `edges` (env steps); mean is nan
   for an empty window."""
-  steps, values = _curve(rows, column)
-  steps, values = steps[np.isfinite(values)], values[np.isfinite(values)]
+  steps, values = _finite_curve(rows, column)
   out = []
   for a, b in zip(edges, edges[1:]):
     inside = values[(steps > a) & (steps <= b)]
@@ -222,8 +228,7 @@ def windows_text(runs, columns, edges_millions) -> str:
     lines.append(f"{run} ({rows[-1].get('env_steps', 0) / 1e6:.2f}M env "
                  f"steps, {rows[-1].get('wall_time', 0.0):,.0f} s)")
     for column in columns:
-      steps, values = _curve(rows, column)
-      steps, values = steps[np.isfinite(values)], values[np.isfinite(values)]
+      steps, values = _finite_curve(rows, column)
       if not len(values):
         lines.append(f"  {column}: no finite value")
         continue

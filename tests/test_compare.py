@@ -93,13 +93,13 @@ def test_a_cell_folder_without_its_trained_population_is_an_error(tmp_path):
          paper={'n_agents': 5, 'trained_n_agents': 4})
   with pytest.raises(ValueError, match=r"0 of its evaluation files "
                      r"\['eval_n5.json'\] play the trained population"):
-    compare.evaluation_file(str(cell))
+    compare.read_evaluation(str(cell))
   (cell / 'eval_n4.json').write_text('[1, 2]')
   with pytest.raises(ValueError, match='eval_n4.json: not an evaluation'):
-    compare.evaluation_file(str(cell))
+    compare.read_evaluation(str(cell))
   (cell / 'eval_n4.json').write_text('{"n_agents": 4,')
   with pytest.raises(ValueError, match='eval_n4.json: not JSON'):
-    compare.evaluation_file(str(cell))
+    compare.read_evaluation(str(cell))
 
 
 @pytest.mark.parametrize('case,message', [
