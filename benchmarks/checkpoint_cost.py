@@ -1,6 +1,7 @@
 """What a run's checkpoint costs: its learners packed or as orbax's PyTree.
 
-    python benchmarks/checkpoint_cost.py [--task ravine] [--saves 15]
+    python benchmarks/checkpoint_cost.py [--task ravine] [--agent hrl]
+        [--saves 15]
 
 A run writes one checkpoint an update (`--checkpoint-every 1`), finishing
 in the background while the next rollouts are collected, so its CPU time
@@ -88,12 +89,14 @@ def main(argv=None):
   parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
   parser.add_argument('--task', default='ravine')
   parser.add_argument('--n-agents', type=int, default=2)
+  parser.add_argument('--agent', default='hrl',
+                      help='variant: hrl, no_memory, flat or mappo')
   parser.add_argument('--saves', type=int, default=15)
   parser.add_argument('--pause', type=float, default=0.5,
                       help='seconds between saves (the next rollouts)')
   args = parser.parse_args(argv)
   train_args = config_lib.train_args(task=args.task, n_agents=args.n_agents,
-                                     progress=False)
+                                     agent=args.agent, progress=False)
   _, _, learners = learner_loop.fresh_learners(train_args)
   arrays = sum(len(jax.tree.leaves(l.save()['state']))
                for l in learners.values())
@@ -128,7 +131,8 @@ def main(argv=None):
       ours = learner.save()['state']
       same = jax.tree.map(np.array_equal, back, ours)
       assert all(jax.tree.leaves(same)), f'{name} did not read back'
-  print(f'{args.task} with {args.n_agents} agents: {len(learners)} '
+  print(f'{args.task} with {args.n_agents} agents, {args.agent}: '
+        f'{len(learners)} '
         f'learners, {arrays} arrays; {args.saves} saves each, '
         f'{args.pause} s apart')
   for name in writers:

@@ -51,6 +51,16 @@ stone off its ends (20 of 20 episodes). A crosser commanded towards the
 finish crossed in 27-32 of 32 episodes with 0.3-1.5 m of command noise
 (docs/results.md, "Ravine, seed 0"): a smaller start, not a proven
 need."""
+FLAT_FLAGS = (('checkpoint_every', 10),)
+"""`flat` cells' own training flags: a checkpoint every 10 updates, i.e.
+every 10,240 env steps, as a commanded variant's every update. A `flat`
+update covers 1,024 env steps (~0.7 s beside another cell), and a save
+every update cost the process ~50 ms a save (docs/performance.md, "`flat`
+cells checkpoint every 10 updates"): ~2-3% of its wall time between
+updates and ~5% of a core in orbax's threads, and 3.8 MB written an update.
+The cadence changes no update: a stop saves, and a crash loses at most 10
+updates (`flat` cells trained before 28 November 2026, 15:00, saved every
+update)."""
 PUSH_BUDGET = 3_000_000
 """Environment steps of transport's push stage, taken from the model's
 `BUDGET`: a transport model trains 15M steps in all (push 3M, then the
@@ -223,8 +233,9 @@ def paper_plan() -> list[Cell]:
       plan += trained('table1', task, 'hrl', n, seed, _zero_shot(n))
   for seed in range(3):
     for agent in ('no_memory', 'flat'):
+      flags = FLAT_FLAGS if agent == 'flat' else ()
       for task, n in TABLE1_TASKS:
-        plan += trained('table1', task, agent, n, seed)
+        plan += trained('table1', task, agent, n, seed, flags=flags)
   for n in (6, 7):
     for seed in range(3):
       for agent in ('hrl', 'mappo'):

@@ -346,6 +346,9 @@ def test_the_plan_is_the_papers():
                   paper_plan.CROSSERS_FLAGS)))
     else:
       assert 'initial_action_std' not in flags, cell.name
+    # `flat` updates cover a tenth of the env steps: a tenth the saves.
+    assert paper.train_args(cell, paper.PaperArgs()).checkpoint_every == (
+        10 if cell.agent == 'flat' else 1), cell.name
     if cell.stage == 'pushers':
       assert cell.budget == paper_plan.STAGE_BUDGET
     if cell.stage == 'crossers':  # They train longer.
