@@ -70,6 +70,15 @@ class ClusterUnreachable(ConnectionError):
   """`--ray-address` names no Ray cluster that lets this process join."""
 
 
+class LocalRayTimeout(RuntimeError):
+  """The local Ray instance did not start within Ray's own wait."""
+
+
+RAY_START_TIMEOUT = 'timed out during startup'
+"""What Ray's error says when its new node has not registered with its GCS
+within the 30 s it waits (`ray._private.node.Node`, not configurable)."""
+
+
 AUTH_HELP = (
     'A cluster with token authentication (`ray start --head` turns it on '
     'where ~/.ray/auth_token exists) needs RAY_AUTH_MODE=token here too, '
@@ -121,6 +130,8 @@ def init_ray(address: str = '', num_cpus: Optional[int] = None) -> bool:
   Raises:
     ClusterUnreachable: nothing answers at `address`, or the cluster
       refused this process (e.g. without its token).
+    LocalRayTimeout: the local instance did not start in Ray's 30 s (on
+      2 cores beside two trainings, coop-train's did not).
   """
   import ray  # pylint: disable=g-import-not-at-top
   if ray.is_initialized():
@@ -153,6 +164,14 @@ def init_ray(address: str = '', num_cpus: Optional[int] = None) -> bool:
     ray.init(address='local', num_cpus=num_cpus, include_dashboard=False,
              # No core metrics collection: nothing here reads it.
              _system_config={'enable_metrics_collection': False}, **quiet)
+  except Exception as e:  # pylint: disable=broad-except
+    if RAY_START_TIMEOUT not in str(e):  # Ray raises a bare Exception.
+      raise
+    raise LocalRayTimeout(
+        f'Ray\'s local instance did not start: {e} Ray waits 30 s for its '
+        'processes, which a machine busy with other work can exceed. Run '
+        'the command again when the machine is less busy, or without Ray, '
+        'in this one process: --actors 0.') from e
   finally:
     ray_constants.ENABLE_RAY_CLUSTER = cluster_mode
     notice.setLevel(level)

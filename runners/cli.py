@@ -81,14 +81,14 @@ def command_line(instance, prog: str, skip=()) -> str:
 
 def user_errors():
   """Exceptions that are the user's to fix (a flag, a path, a busy or
-  damaged run directory, a Ray cluster it cannot join): a CLI prints them
-  as one line."""
+  damaged run directory, a Ray cluster it cannot join, a local Ray that a
+  busy machine kept from starting): a CLI prints them as one line."""
   from runners import actor_pool  # pylint: disable=g-import-not-at-top
   from runners import checkpoints  # pylint: disable=g-import-not-at-top
   from runners import run_dir  # pylint: disable=g-import-not-at-top
   return (ValueError, FileExistsError, FileNotFoundError,
           run_dir.RunInUseError, checkpoints.CorruptCheckpoint,
-          actor_pool.ClusterUnreachable)
+          actor_pool.ClusterUnreachable, actor_pool.LocalRayTimeout)
 
 
 def fail(prog: str, error: Exception):

@@ -131,3 +131,32 @@ def _free_port():
   with socket.socket() as s:
     s.bind(('127.0.0.1', 0))
     return s.getsockname()[1]
+
+
+def test_a_local_ray_that_does_not_start_is_one_line(tmp_path, capsys,
+                                                     monkeypatch):
+  """Ray's own 30 s wait for its node (exceeded on 2 cores beside two
+  trainings) ends coop-train with one line that names --actors 0; Ray's
+  other errors pass through as they are."""
+  import ray  # pylint: disable=g-import-not-at-top
+  message = ('The current node timed out during startup. This could happen '
+             'because some of the raylet failed to startup or the GCS has '
+             'become overloaded.')
+
+  def init(*args, **kwargs):
+    raise Exception(message)  # pylint: disable=broad-exception-raised
+  monkeypatch.setattr(ray, 'is_initialized', lambda: False)
+  monkeypatch.setattr(ray, 'init', init)
+  monkeypatch.delenv('RAY_ADDRESS', raising=False)
+  with pytest.raises(SystemExit) as stop:
+    train.main(['--logdir', str(tmp_path / 'run'), '--total-steps', '1',
+                '--no-progress'])
+  assert stop.value.code == 2
+  lines = capsys.readouterr().err.strip().splitlines()
+  assert len(lines) == 1, lines
+  assert lines[0].startswith(
+      "coop-train: error: Ray's local instance did not start: " + message)
+  assert lines[0].endswith('--actors 0.')
+  message = 'something else'
+  with pytest.raises(Exception, match='^something else$'):
+    actor_pool.init_ray()
