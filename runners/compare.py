@@ -4,6 +4,8 @@
         results/paper/transport_hrl_n4_s0 results/paper/transport_hrl_n4_s1
     coop-compare --evaluations results/paper/ravine_flat_crossers_n2_s0 \
         results/diagnostics/ravine_crossers_flat_n2_s0_sampled/eval_sampled.json
+    coop-compare --evaluations results/paper/transport_hrl_n4_s{0,1,2,3,4} \
+        --paired-with results/diagnostics/transport_hrl_n4_reset_memory/eval_reset_memory.json
 
 The same `coop-eval --seeds` and `--envs` start the same episodes
 (`evaluate.copy_seeds`), so two models evaluated alike (every published
@@ -22,6 +24,10 @@ population's file). A
 file with several models (`coop-eval` with several `--checkpoint`s) gives
 one model per run. The first model is the reference; every other one is
 compared with it, on a 0 / 1 episode figure (`--metric`, default `success`).
+With `--paired-with`, each model is instead compared with the model of the
+same evaluated task and run (`seed_<s>`) in those files, e.g. five trained
+models against the same five played otherwise, and a last row pools the
+pairs: their discordant episodes summed, one McNemar test over them all.
 The models must be of one evaluated task and population, with as many
 episodes and, where the files record it, the same evaluation seed; where
 the task records its starts (transport's `start_agent_cylinder`,
@@ -54,6 +60,12 @@ class CompareArgs:
   metric: str = 'success'
   """The 0 / 1 episode figure to compare (`success`, the ravine's
   `stone_in_place`, ...)."""
+  paired_with: tuple[str, ...] = ()
+  """Evaluations of the same runs played otherwise (`coop-eval
+  --reset-memory`, `--stochastic`, another variant's seeds): each model of
+  `--evaluations` is compared with the one of the same evaluated task and
+  run here (`seed_<s>`), not with a single reference, and a last row pools
+  the pairs (their discordant episodes summed)."""
 
 
 def mcnemar_p(only_a: int, only_b: int) -> float:
@@ -115,11 +127,13 @@ class Model(NamedTuple):
   """One evaluated model: `label` names it, `task` is the evaluated task
   and population (`transport_n4`), `metrics` its per-episode figures,
   `eval_seed` the evaluation's first seed where the file records it (a
-  `coop-paper` eval JSON), else None."""
+  `coop-paper` eval JSON), else None; `run` its marl-eval run
+  (`seed_<s>`)."""
   label: str
   task: str
   metrics: dict[str, list[float]]
   eval_seed: Optional[int] = None
+  run: str = ''
 
 
 def load(paths) -> list[Model]:
@@ -135,7 +149,8 @@ def load(paths) -> list[Model]:
       raise ValueError(f'{path}: {e}') from None
     for name, metrics in runs:
       models.append(Model(f'{path} [{name}]' if len(runs) > 1 else path,
-                          name.split('/')[0], metrics, data.get('eval_seed')))
+                          name.split('/')[0], metrics, data.get('eval_seed'),
+                          name.split('/')[-1]))
   return models
 
 
@@ -179,50 +194,112 @@ def _check_paired(reference: Model, other: Model) -> None:
              f'{a:.3f}')
 
 
+def _pair(reference: Model, other: Model, metric: str) -> dict:
+  """`other` against `reference` on `metric`: its wins, the episodes both
+  win, the discordant ones and their exact McNemar p."""
+  ref, wins = _outcomes(reference, metric), _outcomes(other, metric)
+  if len(wins) != len(ref):
+    raise ValueError(f'{other.label}: {len(wins)} episodes, the reference '
+                     f'{len(ref)}: not the same episodes')
+  _check_paired(reference, other)
+  only_ref = sum(a and not b for a, b in zip(ref, wins))
+  only_other = sum(b and not a for a, b in zip(ref, wins))
+  return {'model': other.label, 'wins': sum(wins),
+          'both': sum(a and b for a, b in zip(ref, wins)),
+          'reference_only': only_ref, 'model_only': only_other,
+          'p': mcnemar_p(only_ref, only_other)}
+
+
 def compare(args: CompareArgs) -> dict:
   """The reference model's wins and, for every other model, its wins and
-  the discordant episodes with their exact McNemar p."""
+  the discordant episodes with their exact McNemar p (with
+  `--paired-with`: `compare_paired`)."""
+  if args.paired_with:
+    return compare_paired(args)
   models = load(args.evaluations)
   if len(models) < 2:
     raise ValueError(f'--evaluations: {len(models)} model(s) '
                      f'{[m.label for m in models]}; name two or more')
   reference = models[0]
-  ref = _outcomes(reference, args.metric)
-  rows = []
-  for other in models[1:]:
-    wins = _outcomes(other, args.metric)
-    if len(wins) != len(ref):
-      raise ValueError(f'{other.label}: {len(wins)} episodes, the reference '
-                       f'{len(ref)}: not the same episodes')
-    _check_paired(reference, other)
-    only_ref = sum(a and not b for a, b in zip(ref, wins))
-    only_other = sum(b and not a for a, b in zip(ref, wins))
-    rows.append({'model': other.label, 'wins': sum(wins),
-                 'both': sum(a and b for a, b in zip(ref, wins)),
-                 'reference_only': only_ref, 'model_only': only_other,
-                 'p': mcnemar_p(only_ref, only_other)})
+  rows = [_pair(reference, other, args.metric) for other in models[1:]]
   return {'reference': reference.label, 'metric': args.metric,
-          'episodes': len(ref), 'reference_wins': sum(ref), 'models': rows}
+          'episodes': len(reference.metrics[args.metric]),
+          'reference_wins': sum(_outcomes(reference, args.metric)),
+          'models': rows}
+
+
+def compare_paired(args: CompareArgs) -> dict:
+  """Each model of `--evaluations` against its run in `--paired-with`
+  (rows as `compare`'s, with the row's own 'reference' and
+  'reference_wins'), and under 'pooled' the rows' counts summed with the
+  exact McNemar p of the summed discordant episodes."""
+  references = load(args.evaluations)
+  others = {}
+  for model in load(args.paired_with):
+    key = (model.task, model.run)
+    if key in others:
+      raise ValueError(f'--paired-with: two models of {model.task} run '
+                       f'{model.run} ({others[key].label}, {model.label})')
+    others[key] = model
+  rows = []
+  for reference in references:
+    other = others.pop((reference.task, reference.run), None)
+    if other is None:
+      raise ValueError(f'--paired-with: no model of {reference.task} run '
+                       f'{reference.run} to pair with {reference.label}')
+    rows.append({'reference': reference.label,
+                 'reference_wins': sum(_outcomes(reference, args.metric)),
+                 'episodes': len(reference.metrics[args.metric]),
+                 **_pair(reference, other, args.metric)})
+  if others:
+    raise ValueError('--paired-with: no model of --evaluations for '
+                     f'{sorted(m.label for m in others.values())}')
+  pooled = {k: sum(r[k] for r in rows) for k in (
+      'episodes', 'reference_wins', 'wins', 'both', 'reference_only',
+      'model_only')}
+  pooled['p'] = mcnemar_p(pooled['reference_only'], pooled['model_only'])
+  return {'metric': args.metric, 'pairs': rows, 'pooled': pooled}
+
+
+def _aligned(rows: list[tuple[str, ...]], left: int) -> list[str]:
+  """`rows` of cells as lines, the first `left` columns left-aligned and
+  the others right-aligned to their widest cell."""
+  widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
+  return ['  '.join(c.ljust(w) if i < left else c.rjust(w)
+                    for i, (c, w) in enumerate(zip(row, widths)))
+          for row in rows]
 
 
 def table(out: dict) -> str:
   """`compare`'s result as aligned text."""
+  metric = out['metric']
+  counts = ('both', 'reference only', 'model only', 'exact McNemar p')
+
+  def tail(r):
+    return (str(r['both']), str(r['reference_only']), str(r['model_only']),
+            f'{r["p"]:.3g}')
+
+  if 'pairs' in out:
+    pooled = out['pooled']
+    return '\n'.join([f'pairs: each model of --evaluations (reference) '
+                      f'against its run in --paired-with (model), {metric}']
+                     + _aligned(
+        [('reference', 'model', metric, metric, *counts)]
+        + [(r['reference'], r['model'],
+            f'{r["reference_wins"]} of {r["episodes"]}',
+            f'{r["wins"]} of {r["episodes"]}', *tail(r))
+           for r in out['pairs']]
+        + [(f'pooled ({len(out["pairs"])} pairs)', '',
+            f'{pooled["reference_wins"]} of {pooled["episodes"]}',
+            f'{pooled["wins"]} of {pooled["episodes"]}', *tail(pooled))],
+        left=2))
   n = out['episodes']
-  head = ('model', out['metric'], 'both', 'reference only', 'model only',
-          'exact McNemar p')
-  lines = [(r['model'], f'{r["wins"]} of {n}', str(r['both']),
-            str(r['reference_only']), str(r['model_only']), f'{r["p"]:.3g}')
-           for r in out['models']]
-  widths = [max(len(row[i]) for row in [head] + lines) for i in range(6)]
-
-  def fmt(row):
-    return '  '.join(c.ljust(w) if i == 0 else c.rjust(w)
-                     for i, (c, w) in enumerate(zip(row, widths)))
-
   return '\n'.join(
-      [f'reference: {out["reference"]}: {out["metric"]} '
-       f'{out["reference_wins"]} of {n} episodes', fmt(head)]
-      + [fmt(row) for row in lines])
+      [f'reference: {out["reference"]}: {metric} '
+       f'{out["reference_wins"]} of {n} episodes']
+      + _aligned([('model', metric, *counts)]
+                 + [(r['model'], f'{r["wins"]} of {n}', *tail(r))
+                    for r in out['models']], left=1))
 
 
 def main(argv=None):

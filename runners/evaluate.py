@@ -9,6 +9,7 @@
         'stone_start_offset=[-0.5,0]'
     coop-eval --checkpoint runs/ravine_hrl_crossers_n2_s0 --stage joint \
         --policy-from pusher=runs/ravine_hrl_pushers_n2_s0
+    coop-eval --checkpoint runs/transport_hrl_n4_s0 --reset-memory ant
 
 `--checkpoint` takes run directories (their newest checkpoint) or checkpoint
 directories; several are several trained models (the paper: 5 models x 100
@@ -24,7 +25,8 @@ training ones; any other count works (one policy per species, fixed-size
 exteroception); `--option` sets any field of the task's config, e.g. to
 play a curriculum stage from chosen starts, and `--policy-from` plays a
 species with another checkpoint's policy, e.g. to compose curriculum
-stages. `--video`
+stages, and `--reset-memory` starts the GRU afresh at every command (a
+probe of what a recurrent policy draws from its memory). `--video`
 films the first evaluated episode (first model, first seed, first copy) as
 it is played, headless, one frame per control step, with
 `coop_suite.camera.FramingCamera`; `--trace` writes the same episode's
@@ -36,7 +38,7 @@ import dataclasses
 import json
 import os
 import sys
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -76,6 +78,12 @@ class EvalArgs:
   differently with the batch's size, and contacts amplify that."""
   stochastic: bool = False
   """Sample commands instead of taking the policy's mean."""
+  reset_memory: tuple[str, ...] = ()
+  """Species whose middle layer (GRU) starts from its initial state at
+  every command, as at an episode's first: a memory probe, the trained
+  recurrent policy with what it carries between commands taken away
+  (`ant`; the ravine's `crosser`, `pusher` or both; `hrl` and `mappo`
+  only, the variants that carry one). Saved with each model's figures."""
   stage: str = ''
   """Curriculum stage of the task (ravine: joint, pushers, crossers;
   transport: joint, push); empty for the training one."""
@@ -299,10 +307,12 @@ def _actors(batch, models, seed, deterministic):
   return actors
 
 
-def _act(actors, batch, models):
+def _act(actors, batch, models, reset_memory=()):
   actions = {}
   for name, actor in actors.items():
     observation, reset, _ = batch.rows[name]
+    if name in reset_memory:  # Every command starts from the initial carry.
+      reset = np.ones_like(reset)
     size = models[name][0].global_state_size
     # The centralised critic is not needed to act: zeros of its size.
     state = None if size is None else np.zeros((len(reset), size),
@@ -319,14 +329,15 @@ def copy_seeds(seed: int, num_envs: int) -> np.ndarray:
 
 def play(spec, config, models, seed: int, episodes: int, num_envs: int,
          deterministic: bool = True, video: str = '', size=(640, 480),
-         trace: str = '') -> list[dict]:
+         trace: str = '', reset_memory: Sequence[str] = ()) -> list[dict]:
   """`episodes` episode metric dicts, `num_envs` copies playing fixed
   shares, the first copy's first. With `video`, that first episode is
   filmed into the mp4 `video` at `size` (width, height) as it is played:
   the film is an evaluated episode, not a replay (a batch of another size
   rounds the networks' outputs differently, so a replay could diverge).
   With `trace`, the same episode's positions and figures per control step
-  go to that CSV (`EvalArgs.trace`)."""
+  go to that CSV (`EvalArgs.trace`). The species in `reset_memory` act from
+  their initial carry at every command (`EvalArgs.reset_memory`)."""
   from runners import rollout  # pylint: disable=g-import-not-at-top
   num_envs = min(num_envs, episodes)
   recording = []
@@ -344,7 +355,7 @@ def play(spec, config, models, seed: int, episodes: int, num_envs: int,
   try:
     actors = _actors(batch, models, seed, deterministic)
     while any(len(r) < q for r, q in zip(results, quota)):
-      _, ended, _ = batch.step(_act(actors, batch, models))
+      _, ended, _ = batch.step(_act(actors, batch, models, reset_memory))
       for episode in ended:
         if len(results[episode['env']]) < quota[episode['env']]:
           results[episode['env']].append(episode)
@@ -458,6 +469,14 @@ def evaluate(args: EvalArgs, log=None) -> dict:
     spec, config, models, state = load_model(path, args)
     description = (f'{spec.task} with {spec.n_agents} agents, agent '
                    f'{config.agent}')
+    if args.reset_memory and not config.recurrent:
+      raise ValueError(f'--reset-memory: {path} is agent {config.agent!r}, '
+                       'which carries no memory between commands (hrl and '
+                       'mappo do).')
+    unknown = sorted(set(args.reset_memory) - set(models))
+    if unknown:
+      raise ValueError(f'--reset-memory: no species {unknown} in {path} '
+                       f'(it has {sorted(models)}).')
     played = []
     for seed in args.seeds:
       # The first model's first episode is filmed and traced (`play`).
@@ -465,7 +484,7 @@ def evaluate(args: EvalArgs, log=None) -> dict:
       video = args.video if first else ''
       played += play(spec, config, models, seed, args.episodes, args.envs,
                      not args.stochastic, video, (args.width, args.height),
-                     args.trace if first else '')
+                     args.trace if first else '', args.reset_memory)
       if first and (args.video or args.trace):
         recorded = bool(played[0]['success'])
       if video and args.strip:
@@ -485,6 +504,7 @@ def evaluate(args: EvalArgs, log=None) -> dict:
                       'agent': config.agent,
                       'seed': config.seed,
                       'options': args.task_options(),
+                      'reset_memory': list(args.reset_memory),
                       'policy_from': state['policy_from'],
                       'episodes': [metrics_lib.episode_figures(e)
                                    for e in played]})
@@ -520,6 +540,9 @@ def main(argv=None):
         f'{len(args.seeds)} seed(s) x {args.episodes} episodes')
   for name, source in out['models'][0]['policy_from'].items():
     print(f'{name}: the policy of {source}')
+  if args.reset_memory:
+    print('memory reset to the initial carry at every command: '
+          + ', '.join(args.reset_memory))
   if args.option:
     print('task options: ' + ', '.join(
         f'{k}={v!r}' for k, v in args.task_options().items()))

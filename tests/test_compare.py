@@ -72,6 +72,51 @@ def test_counts_the_discordant_episodes(tmp_path, capsys):
   assert 'transport_n4/flat/seed_1' in out.splitlines()[3]
 
 
+def test_paired_with_compares_each_run_with_its_own_and_pools(tmp_path,
+                                                              capsys):
+  starts = [1.0, 2.0, 3.0, 4.0]
+  # Two runs, two files each way: seed 0 played both ways, seed 1 too.
+  refs = [_write(tmp_path / f'ref{s}.json',
+                 _model(wins, seed=s, starts=starts))
+          for s, wins in ((0, [1, 1, 1, 0]), (1, [1, 0, 0, 0]))]
+  probe = _write(tmp_path / 'probe.json',
+                 _model([0, 1, 0, 1], seed=1, starts=starts),
+                 _model([0, 0, 1, 0], seed=0, starts=starts))
+  out = compare.compare(compare.CompareArgs(evaluations=tuple(refs),
+                                            paired_with=(probe,)))
+  first, second = out['pairs']
+  # Seed 0: 3 of 4 against 1 of 4 (both 1, reference only 2, model only 0);
+  # seed 1 against its own run, not the file's first model.
+  assert (first['reference'], first['reference_wins'], first['wins'],
+          first['both'], first['reference_only'], first['model_only']) == (
+              refs[0], 3, 1, 1, 2, 0)
+  assert first['model'].endswith('[transport_n4/hrl/seed_0]')
+  assert (second['reference_wins'], second['wins'], second['both'],
+          second['reference_only'], second['model_only']) == (1, 2, 0, 1, 2)
+  assert out['pooled'] == {
+      'episodes': 8, 'reference_wins': 4, 'wins': 3, 'both': 1,
+      'reference_only': 3, 'model_only': 2, 'p': compare.mcnemar_p(3, 2)}
+  compare.main(['--evaluations', *refs, '--paired-with', probe])
+  lines = capsys.readouterr().out.splitlines()
+  assert lines[-1].split()[:6] == ['pooled', '(2', 'pairs)', '4', 'of', '8']
+  # A run without its pair, a pair without its run, a run twice: errors.
+  for evaluations, paired, message in (
+      (refs + [_write(tmp_path / 'ref2.json', _model([1, 0, 0, 0], seed=2,
+                                                      starts=starts))],
+       (probe,), 'no model of transport_n4 run seed_2'),
+      (refs[:1], (probe,), r'no model of --evaluations for .*seed_1'),
+      (refs, (probe, probe), 'two models of transport_n4 run seed_1')):
+    with pytest.raises(ValueError, match=message):
+      compare.compare(compare.CompareArgs(evaluations=tuple(evaluations),
+                                          paired_with=paired))
+  # The pairs are checked as any: other starts are not the same episodes.
+  moved = _write(tmp_path / 'moved.json',
+                 _model([0, 0, 1, 0], seed=0, starts=[1.0, 2.0, 3.0, 9.0]))
+  with pytest.raises(ValueError, match='start_agent_cylinder of episode 3'):
+    compare.compare(compare.CompareArgs(evaluations=tuple(refs[:1]),
+                                        paired_with=(moved,)))
+
+
 def test_a_coop_paper_cell_folder_reads_its_trained_population(tmp_path):
   cell = tmp_path / 'transport_hrl_n4_s0'
   cell.mkdir()

@@ -159,6 +159,10 @@ def test_variant_trains_in_process(agent, controller, hrl_run, tmp_path):
     moved = [not np.array_equal(a, b) for a, b in
              zip(jax.tree.leaves(initial), jax.tree.leaves(trained))]
     assert all(moved), (agent, name)
+  if agent in ('no_memory', 'flat'):  # Nothing carried to reset.
+    with pytest.raises(ValueError, match='--reset-memory:.*carries no memory'):
+      evaluate.evaluate(evaluate.EvalArgs(checkpoint=(logdir,), episodes=1,
+                                          envs=1, reset_memory=('ant',)))
 
 
 def test_checkpoints_keep_the_newest_and_resume_continues(controller, hrl_run,
@@ -366,6 +370,46 @@ def test_the_filmed_episode_is_the_first_evaluated_one(hrl_run, tmp_path):
   assert distances[0] < distances[1], distances
   video_lib.write_strip(video, str(tmp_path / 'strip.png'), count=3)
   assert imageio.imread(tmp_path / 'strip.png').shape == (24, 3 * 32, 3)
+
+
+def test_reset_memory_acts_from_the_initial_carry_at_every_command(
+    hrl_run, monkeypatch):
+  from agents.hierarchy import acting  # pylint: disable=g-import-not-at-top
+  args = evaluate.EvalArgs(checkpoint=[hrl_run], time_limit=1.0)
+  spec, config, models, _ = evaluate.load_model(hrl_run, args)
+  select = acting.HierarchyActor.select_action
+  calls = []
+
+  def spy(self, observation, reset, global_state=None):
+    action, extras = select(self, observation, reset, global_state)
+    calls.append((self, np.array(observation), np.array(reset), action))
+    return action, extras
+  monkeypatch.setattr(acting.HierarchyActor, 'select_action', spy)
+
+  def replayed_from_initial_carry(played_calls):
+    """Each command's action again, from the initial carry."""
+    same = []
+    for actor, observation, _, action in played_calls:
+      actor.carry = actor._networks.initial_carry(len(observation))  # pylint: disable=protected-access
+      again, _ = select(actor, observation, np.zeros(len(observation), bool))
+      same.append(np.allclose(again, action, atol=1e-5))
+    return same
+
+  kept = evaluate.play(spec, config, models, 5, 2, 2)
+  kept_calls, calls[:] = list(calls), []
+  probed = evaluate.play(spec, config, models, 5, 2, 2, reset_memory=['ant'])
+  assert len(probed) == 2 and len(calls) == len(kept_calls) > 2
+  assert all(reset.all() for _, _, reset, _ in calls)
+  assert all(replayed_from_initial_carry(calls))
+  # Without it the carry matters: mid-episode commands act otherwise.
+  assert not kept_calls[1][2].any()
+  assert not all(replayed_from_initial_carry(kept_calls[1:]))
+  assert [e['return'] for e in probed] != [e['return'] for e in kept]
+  out = evaluate.evaluate(dataclasses.replace(
+      args, episodes=1, envs=1, reset_memory=('ant',)))
+  assert out['models'][0]['reset_memory'] == ['ant']
+  with pytest.raises(ValueError, match=r"no species \['crosser'\]"):
+    evaluate.evaluate(dataclasses.replace(args, reset_memory=('crosser',)))
 
 
 def test_the_stability_figures_are_logged_and_checkpointed(hrl_run):
