@@ -316,8 +316,18 @@ def test_a_cells_flags_cannot_make_it_another_run(tmp_path):
 def test_the_plan_is_the_papers():
   plan = paper_plan.PLAN
   assert len({c.name for c in plan}) == len(plan)
-  first = [c.experiment for c in plan]
-  assert first == sorted(first, key=['table1', 'mappo', 'scaling'].index)
+  # HRL's rows first; then every experiment's first seed before any
+  # ablation's third, and the figures' seed 0 before their seed 1.
+  kinds = [(c.experiment, c.agent == 'hrl', c.seed) for c in plan]
+  hrl_rows = [k[:2] == ('table1', True) for k in kinds]
+  assert hrl_rows == sorted(hrl_rows, reverse=True)
+  third = min(i for i, k in enumerate(kinds) if k[0] == 'table1'
+              and not k[1] and k[2] == 2)
+  for experiment in ('mappo', 'scaling'):
+    seeds = [k[2] for k in kinds if k[0] == experiment]
+    assert seeds == sorted(seeds) and seeds[0] == 0
+    assert min(i for i, k in enumerate(kinds) if k[0] == experiment) < third
+  assert all(k[2] < 2 for k in kinds[:third] if k[0] == 'table1' and not k[1])
   hrl = [c for c in plan if c.experiment == 'table1' and c.agent == 'hrl'
          and not c.stage]
   assert sorted({(c.task, c.n_agents) for c in hrl}) == [
