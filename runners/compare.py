@@ -241,9 +241,14 @@ def compare_paired(args: CompareArgs) -> dict:
       raise ValueError(f'--paired-with: two models of {model.task} run '
                        f'{model.run} ({others[key].label}, {model.label})')
     others[key] = model
-  rows = []
+  rows, seen = [], {}
   for reference in references:
-    other = others.pop((reference.task, reference.run), None)
+    key = (reference.task, reference.run)
+    if key in seen:
+      raise ValueError(f'--evaluations: two models of {reference.task} run '
+                       f'{reference.run} ({seen[key]}, {reference.label})')
+    seen[key] = reference.label
+    other = others.pop(key, None)
     if other is None:
       raise ValueError(f'--paired-with: no model of {reference.task} run '
                        f'{reference.run} to pair with {reference.label}')

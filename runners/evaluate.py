@@ -83,7 +83,9 @@ class EvalArgs:
   every command, as at an episode's first: a memory probe, the trained
   recurrent policy with what it carries between commands taken away
   (`ant`; the ravine's `crosser`, `pusher` or both; `hrl` and `mappo`
-  only, the variants that carry one). Saved with each model's figures."""
+  only, the variants that carry one). Kept in each model's figures that
+  `evaluate` returns; the `--json` file's layout has no place for it, so
+  keep a probe's files apart (as `--option`'s)."""
   stage: str = ''
   """Curriculum stage of the task (ravine: joint, pushers, crossers;
   transport: joint, push); empty for the training one."""

@@ -105,7 +105,9 @@ def test_paired_with_compares_each_run_with_its_own_and_pools(tmp_path,
                                                       starts=starts))],
        (probe,), 'no model of transport_n4 run seed_2'),
       (refs[:1], (probe,), r'no model of --evaluations for .*seed_1'),
-      (refs, (probe, probe), 'two models of transport_n4 run seed_1')):
+      (refs, (probe, probe), 'two models of transport_n4 run seed_1'),
+      (refs + refs[:1], (probe,), '--evaluations: two models of transport_n4 '
+                                  'run seed_0')):
     with pytest.raises(ValueError, match=message):
       compare.compare(compare.CompareArgs(evaluations=tuple(evaluations),
                                           paired_with=paired))

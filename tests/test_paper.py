@@ -327,7 +327,9 @@ def test_the_plan_is_the_papers():
     seeds = [k[2] for k in kinds if k[0] == experiment]
     assert seeds == sorted(seeds) and seeds[0] == 0
     assert min(i for i, k in enumerate(kinds) if k[0] == experiment) < third
-  assert all(k[2] < 2 for k in kinds[:third] if k[0] == 'table1' and not k[1])
+  # Every figure's seed-0 cell before that, every seed-1 and -2 cell after.
+  assert all(k[2] == 0 for k in kinds[:third] if k[0] != 'table1')
+  assert all(k[2] > 0 for k in kinds[third:] if k[0] != 'table1')
   hrl = [c for c in plan if c.experiment == 'table1' and c.agent == 'hrl'
          and not c.stage]
   assert sorted({(c.task, c.n_agents) for c in hrl}) == [
