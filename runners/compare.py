@@ -195,8 +195,9 @@ def _check_paired(reference: Model, other: Model) -> None:
 
 
 def _pair(reference: Model, other: Model, metric: str) -> dict:
-  """`other` against `reference` on `metric`: its wins, the episodes both
-  win, the discordant ones and their exact McNemar p."""
+  """`other` against `reference` on `metric`: the episodes and the
+  reference's wins, its wins, the episodes both win, the discordant ones
+  and their exact McNemar p."""
   ref, wins = _outcomes(reference, metric), _outcomes(other, metric)
   if len(wins) != len(ref):
     raise ValueError(f'{other.label}: {len(wins)} episodes, the reference '
@@ -204,10 +205,24 @@ def _pair(reference: Model, other: Model, metric: str) -> dict:
   _check_paired(reference, other)
   only_ref = sum(a and not b for a, b in zip(ref, wins))
   only_other = sum(b and not a for a, b in zip(ref, wins))
-  return {'model': other.label, 'wins': sum(wins),
+  return {'episodes': len(ref), 'reference_wins': sum(ref),
+          'model': other.label, 'wins': sum(wins),
           'both': sum(a and b for a, b in zip(ref, wins)),
           'reference_only': only_ref, 'model_only': only_other,
           'p': mcnemar_p(only_ref, only_other)}
+
+
+def _by_run(models: list[Model], flag: str) -> dict[tuple[str, str], Model]:
+  """`models` by (evaluated task, run), in order; two models of one run
+  in `flag`'s files are an error (which would it pair with?)."""
+  runs = {}
+  for model in models:
+    key = (model.task, model.run)
+    if key in runs:
+      raise ValueError(f'{flag}: two models of {model.task} run {model.run} '
+                       f'({runs[key].label}, {model.label})')
+    runs[key] = model
+  return runs
 
 
 def compare(args: CompareArgs) -> dict:
@@ -223,38 +238,24 @@ def compare(args: CompareArgs) -> dict:
   reference = models[0]
   rows = [_pair(reference, other, args.metric) for other in models[1:]]
   return {'reference': reference.label, 'metric': args.metric,
-          'episodes': len(reference.metrics[args.metric]),
-          'reference_wins': sum(_outcomes(reference, args.metric)),
-          'models': rows}
+          'episodes': rows[0]['episodes'],
+          'reference_wins': rows[0]['reference_wins'], 'models': rows}
 
 
 def compare_paired(args: CompareArgs) -> dict:
   """Each model of `--evaluations` against its run in `--paired-with`
-  (rows as `compare`'s, with the row's own 'reference' and
-  'reference_wins'), and under 'pooled' the rows' counts summed with the
+  (rows as `compare`'s, with the row's own 'reference'), and under
+  'pooled' the rows' counts summed with the
   exact McNemar p of the summed discordant episodes."""
-  references = load(args.evaluations)
-  others = {}
-  for model in load(args.paired_with):
-    key = (model.task, model.run)
-    if key in others:
-      raise ValueError(f'--paired-with: two models of {model.task} run '
-                       f'{model.run} ({others[key].label}, {model.label})')
-    others[key] = model
-  rows, seen = [], {}
-  for reference in references:
-    key = (reference.task, reference.run)
-    if key in seen:
-      raise ValueError(f'--evaluations: two models of {reference.task} run '
-                       f'{reference.run} ({seen[key]}, {reference.label})')
-    seen[key] = reference.label
+  references = _by_run(load(args.evaluations), '--evaluations')
+  others = _by_run(load(args.paired_with), '--paired-with')
+  rows = []
+  for key, reference in references.items():
     other = others.pop(key, None)
     if other is None:
       raise ValueError(f'--paired-with: no model of {reference.task} run '
                        f'{reference.run} to pair with {reference.label}')
     rows.append({'reference': reference.label,
-                 'reference_wins': sum(_outcomes(reference, args.metric)),
-                 'episodes': len(reference.metrics[args.metric]),
                  **_pair(reference, other, args.metric)})
   if others:
     raise ValueError('--paired-with: no model of --evaluations for '
