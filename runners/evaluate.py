@@ -309,6 +309,25 @@ def _actors(batch, models, seed, deterministic):
   return actors
 
 
+def check_reset_memory(reset_memory: Sequence[str], models, path: str,
+                       borrowed: dict[str, str]) -> None:
+  """Refuses a `--reset-memory` species that `models` (`load_model`'s, of
+  the checkpoint `path`) lacks or whose policy carries no memory between
+  commands: its own variant's, so a `--policy-from` species (`borrowed`:
+  name -> its checkpoint) is judged by the checkpoint it comes from."""
+  unknown = sorted(set(reset_memory) - set(models))
+  if unknown:
+    raise ValueError(f'--reset-memory: no species {unknown} in {path} '
+                     f'(it has {sorted(models)}).')
+  for name in reset_memory:
+    config = models[name][1].config
+    if not config.recurrent:
+      raise ValueError(
+          f'--reset-memory: {name}\'s policy in {borrowed.get(name, path)} '
+          f'is agent {config.agent!r}, which carries no memory between '
+          'commands (hrl and mappo do).')
+
+
 def _act(actors, batch, models, reset_memory=()):
   actions = {}
   for name, actor in actors.items():
@@ -467,18 +486,13 @@ def evaluate(args: EvalArgs, log=None) -> dict:
   log = log or (lambda line: None)
   per_model, episodes, description = [], [], None
   recorded = None
-  for index, path in enumerate(args.checkpoint):
-    spec, config, models, state = load_model(path, args)
+  # Every model loads and is checked before the first one plays.
+  loaded = [load_model(path, args) for path in args.checkpoint]
+  for path, (_, _, models, state) in zip(args.checkpoint, loaded):
+    check_reset_memory(args.reset_memory, models, path, state['policy_from'])
+  for index, (spec, config, models, state) in enumerate(loaded):
     description = (f'{spec.task} with {spec.n_agents} agents, agent '
                    f'{config.agent}')
-    if args.reset_memory and not config.recurrent:
-      raise ValueError(f'--reset-memory: {path} is agent {config.agent!r}, '
-                       'which carries no memory between commands (hrl and '
-                       'mappo do).')
-    unknown = sorted(set(args.reset_memory) - set(models))
-    if unknown:
-      raise ValueError(f'--reset-memory: no species {unknown} in {path} '
-                       f'(it has {sorted(models)}).')
     played = []
     for seed in args.seeds:
       # The first model's first episode is filmed and traced (`play`).

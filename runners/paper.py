@@ -39,6 +39,7 @@ import math
 import os
 import shutil
 import signal
+import statistics
 import sys
 import time
 from typing import Callable, Optional
@@ -334,9 +335,44 @@ def measured_pace(cell: paper_plan.Cell, args: PaperArgs
   return rate if rate > 0 and math.isfinite(rate) else None
 
 
+def done_pace(args: PaperArgs, plan=None) -> dict[str, list[float]]:
+  """{variant: the Ant steps/s of each of its done cells' training}: env
+  steps times the cell's Ants over the wall time of its updates (its
+  committed metrics.csv's last row; resumed runs count on), whatever the
+  machine and whatever ran beside it."""
+  paces = {}
+  for cell in plan or paper_plan.PLAN:
+    if not is_done(cell, args):
+      continue
+    try:
+      last = run_dir.read_metrics(results_directory(cell, args))[-1]
+    except (OSError, ValueError, IndexError, csv.Error):
+      continue
+    if last.get('wall_time', 0) > 0 and last.get('env_steps', 0) > 0:
+      paces.setdefault(cell.agent, []).append(
+          last['env_steps'] * cell.ants / last['wall_time'])
+  return paces
+
+
+def estimate_rates(paces: dict[str, list[float]], agents
+                   ) -> dict[str, float]:
+  """{variant: Ant steps/s the estimate takes}, for `paces`' variants and
+  `agents`: the median of the variant's done cells (`done_pace`); a
+  variant with none at `hrl`'s (`mappo` and
+  `no_memory` ran at or above it in short probes, docs/performance.md);
+  empty without done `hrl` cells (`runners.paper_plan`'s constants)."""
+  rates = {agent: statistics.median(values) for agent, values in paces.items()}
+  if 'hrl' not in rates:
+    return rates
+  return {agent: rates.get(agent, rates['hrl'])
+          for agent in dict.fromkeys(('hrl', *rates, *agents))}
+
+
 def dry_run(args: PaperArgs, plan=None) -> str:
   """The plan as text: per cell its status, budget, estimated remaining
-  wall time on the plan's reference machine and command (and, for a cell
+  wall time and command (estimated at the pace of the variant's done
+  cells, `estimate_rates`; without done `hrl` cells at
+  `runners.paper_plan`'s constants) (and, for a cell
   that a coop-paper process runs, i.e. holds its `claim`, which one and the
   pace it measures); then the total at the estimate's rate and, where
   cells run, at the pace they make together."""
@@ -344,13 +380,15 @@ def dry_run(args: PaperArgs, plan=None) -> str:
                   f'{"to go":>9s}  command'], 0.0
   pace = []  # Each running cell's measured rate / its estimated rate.
   cells = selected(args, plan)
+  paces = done_pace(args, plan)
+  rates = estimate_rates(paces, [cell.agent for cell in cells])
   for cell in cells:
     state = status(cell, args)
     steps = budget(cell, args)
     remaining = {'done': None, 'trained': 0, 'foreign': steps}.get(
         state.state, steps - state.env_steps)
     seconds = 0.0 if remaining is None else paper_plan.estimated_seconds(
-        cell, max(remaining, 0), args.episodes)
+        cell, max(remaining, 0), args.episodes, rates.get(cell.agent))
     total += seconds
     lines.append(f'{cell.path:32s} {state.describe(steps):22s} '
                  f'{steps / 1e6:6g}M  ~{seconds / 3600:6.1f} h  '
@@ -362,16 +400,26 @@ def dry_run(args: PaperArgs, plan=None) -> str:
       lines.append(f'  running: coop-paper pid, host {holder}')
       rate = measured_pace(cell, args)
       if rate is not None:
-        pace.append(rate / paper_plan.estimated_rate(cell))
+        pace.append(rate / paper_plan.estimated_rate(
+            cell, rates.get(cell.agent)))
         lines.append(f'  pace: {rate:,.0f} env steps/s over its last '
                      f'{PACE_WINDOW / 60:g} min of updates, {pace[-1]:.2f}x '
                      'the estimate')
-  lines.append(f'{len(cells)} cells, ~{total / 3600:.0f} h to go at '
-               f'{paper_plan.AGENT_STEPS_PER_SECOND:,.0f} Ant steps/s, '
-               + ', '.join(f'{agent} at {share:g} of it'
-                           for agent, share in
-                           paper_plan.VARIANT_SPEED.items())
-               + ' (runners.paper_plan)')
+  if rates:
+    lines.append(
+        f'{len(cells)} cells, ~{total / 3600:.0f} h of cell time to go at '
+        'the pace of the done cells (Ant steps/s, median of the '
+        'variant\'s: ' + ', '.join(
+            f'{agent} {rate:,.0f} of {len(paces[agent])}' if agent in paces
+            else f'{agent} at hrl\'s' for agent, rate in rates.items())
+        + '; as they ran, beside what ran with them)')
+  else:
+    lines.append(f'{len(cells)} cells, ~{total / 3600:.0f} h to go at '
+                 f'{paper_plan.AGENT_STEPS_PER_SECOND:,.0f} Ant steps/s, '
+                 + ', '.join(f'{agent} at {share:g} of it'
+                             for agent, share in
+                             paper_plan.VARIANT_SPEED.items())
+                 + ' (runners.paper_plan)')
   if pace:
     running = f'the {len(pace)} cells' if len(pace) > 1 else 'the cell'
     together = ' together' if len(pace) > 1 else ''

@@ -23,7 +23,7 @@ are worth running (`runners.paper` trains them in that order):
 """
 import dataclasses
 import fnmatch
-from typing import Any
+from typing import Any, Optional
 
 from agents.hierarchy import config as hierarchy_config
 
@@ -82,7 +82,9 @@ EPISODE_SECONDS = 40.0
 """Episode length of the three tasks (docs/tasks.md), for time estimates."""
 CONTROL_TIMESTEP = 0.05
 AGENT_STEPS_PER_SECOND = 6_400.0
-"""Estimated Ant steps per second of a run: 1,600 env steps/s with 4 Ants
+"""Estimated Ant steps per second of a run where no `hrl` cell is done
+(`coop-paper --dry-run` otherwise takes the done cells' pace,
+`runners.paper.estimate_rates`): 1,600 env steps/s with 4 Ants
 (`hrl`, 2 actors, the 2-core AMD EPYC development machine: corridor/hrl/n4/s0
 averaged 1,640 beside other work; docs/paper.md); a cell with k Ants per
 copy is estimated at 6,400 / k env steps/s."""
@@ -267,21 +269,22 @@ def paper_plan() -> list[Cell]:
 PLAN = paper_plan()
 
 
-def estimated_seconds(cell: Cell, steps: int, episodes: int = EPISODES
-                      ) -> float:
+def estimated_seconds(cell: Cell, steps: int, episodes: int = EPISODES,
+                      ant_rate: Optional[float] = None) -> float:
   """Estimated wall time (s) of `steps` training steps of `cell` plus the
-  evaluations of its final checkpoint, at `AGENT_STEPS_PER_SECOND` times
-  the variant's `VARIANT_SPEED`."""
+  evaluations of its final checkpoint, at `estimated_rate`."""
   steps_per_episode = EPISODE_SECONDS / CONTROL_TIMESTEP
   ant_steps = steps * cell.ants + sum(
       episodes * steps_per_episode * (cell.ants - cell.n_agents + n)
       for n in cell.populations)
-  return ant_steps / (estimated_rate(cell) * cell.ants)
+  return ant_steps / (estimated_rate(cell, ant_rate) * cell.ants)
 
 
-def estimated_rate(cell: Cell) -> float:
-  """The estimated training rate of `cell` in env steps/s:
-  `AGENT_STEPS_PER_SECOND` times the variant's `VARIANT_SPEED`, over the
-  Ants of a copy."""
-  return (AGENT_STEPS_PER_SECOND * VARIANT_SPEED.get(cell.agent, 1.0)
-          / cell.ants)
+def estimated_rate(cell: Cell, ant_rate: Optional[float] = None) -> float:
+  """The estimated training rate of `cell` in env steps/s: `ant_rate`
+  (Ant steps/s, e.g. the pace of the variant's done cells that
+  `coop-paper --dry-run` measures), else `AGENT_STEPS_PER_SECOND` times the
+  variant's `VARIANT_SPEED`, over the Ants of a copy."""
+  if ant_rate is None:
+    ant_rate = AGENT_STEPS_PER_SECOND * VARIANT_SPEED.get(cell.agent, 1.0)
+  return ant_rate / cell.ants

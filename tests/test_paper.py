@@ -488,6 +488,40 @@ def _plan_cells(*paths):
   return [by_path[path] for path in paths]
 
 
+def test_dry_run_estimates_at_the_pace_of_the_done_cells(tmp_path):
+  """Each variant's remaining cells at the median Ant steps/s of its done
+  cells (metrics.csv's last row); a variant without any at hrl's; a done
+  cell without wall times counts for nothing."""
+  args = _args(tmp_path)
+  cells = _plan_cells('corridor/hrl/n4/s0', 'corridor/hrl/n4/s1',
+                      'corridor/hrl/n4/s2', 'corridor/flat/n4/s0',
+                      'corridor/hrl/n4/s3', 'corridor/flat/n4/s1',
+                      'corridor/mappo/n6/s0')
+  for cell, wall in zip(cells[:4], (100, 200, 400, 800)):
+    _commit(cell, args, {n: [1] for n in cell.populations})
+    with open(os.path.join(paper.results_directory(cell, args),
+                           'metrics.csv'), 'w') as f:
+      f.write(f'update,env_steps,wall_time\n1,4000,{wall / 2}\n'
+              f'2,8000,{wall}\n')
+  _commit(cells[4], args, {n: [1] for n in cells[4].populations})
+  paces = paper.done_pace(args, cells)
+  assert paces == {'hrl': [320.0, 160.0, 80.0], 'flat': [40.0]}
+  rates = paper.estimate_rates(paces, ['mappo'])
+  assert rates == {'hrl': 160.0, 'flat': 40.0, 'mappo': 160.0}
+  assert paper.estimate_rates({'flat': [40.0]}, ['hrl']) == {'flat': 40.0}
+  lines = paper.dry_run(args, cells).splitlines()
+  total = 0.0
+  for cell, line in zip(cells[5:], lines[6:]):
+    seconds = paper_plan.estimated_seconds(cell, paper.budget(cell, args),
+                                           args.episodes, rates[cell.agent])
+    assert f'~{seconds / 3600:6.1f} h' in line
+    total += seconds
+  assert lines[-1] == (
+      f'7 cells, ~{total / 3600:.0f} h of cell time to go at the pace of the '
+      "done cells (Ant steps/s, median of the variant's: hrl 160 of 3, flat "
+      "40 of 1, mappo at hrl's; as they ran, beside what ran with them)")
+
+
 def test_dry_run_measures_the_pace_of_the_cells_running_now(tmp_path):
   """A claimed cell's metrics.csv gives its pace over its last 10 min of
   updates; the total is also given at the running cells' pace. A cell

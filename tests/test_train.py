@@ -8,6 +8,7 @@ import shutil
 import signal
 import threading
 import time
+import types
 
 import imageio
 import jax
@@ -162,7 +163,16 @@ def test_variant_trains_in_process(agent, controller, hrl_run, tmp_path):
   if agent in ('no_memory', 'flat'):  # Nothing carried to reset.
     with pytest.raises(ValueError, match='--reset-memory:.*carries no memory'):
       evaluate.evaluate(evaluate.EvalArgs(checkpoint=(logdir,), episodes=1,
-                                          envs=1, reset_memory=('ant',)))
+                                          envs=1, reset_memory=tuple(species)))
+  if agent == 'no_memory':  # Refused before the first model plays.
+    heard = []
+    with pytest.raises(ValueError, match='--reset-memory: ant.s policy in '
+                       f'{logdir} .*carries no memory'):
+      evaluate.evaluate(evaluate.EvalArgs(checkpoint=(hrl_run, logdir),
+                                          episodes=1, envs=1,
+                                          reset_memory=('ant',)),
+                        log=heard.append)
+    assert not heard
 
 
 def test_checkpoints_keep_the_newest_and_resume_continues(controller, hrl_run,
@@ -410,6 +420,39 @@ def test_reset_memory_acts_from_the_initial_carry_at_every_command(
   assert out['models'][0]['reset_memory'] == ['ant']
   with pytest.raises(ValueError, match=r"no species \['crosser'\]"):
     evaluate.evaluate(dataclasses.replace(args, reset_memory=('crosser',)))
+
+
+def test_reset_memory_resets_the_named_species_only():
+  names = ('crosser', 'pusher')
+  resets = {}
+
+  class Actor:
+
+    def __init__(self, name):
+      self.name = name
+
+    def select_action(self, observation, reset, global_state):
+      resets[self.name] = np.array(reset)
+      return np.zeros((len(observation), 2)), {}
+  reset = np.array([True, False, False])
+  batch = types.SimpleNamespace(
+      rows={n: (np.zeros((3, 4)), reset, None) for n in names})
+  models = {n: (types.SimpleNamespace(global_state_size=None),)
+            for n in names}
+  evaluate._act({n: Actor(n) for n in names}, batch, models, ('crosser',))  # pylint: disable=protected-access
+  assert resets['crosser'].all()
+  assert resets['pusher'].tolist() == reset.tolist()
+  # Each species is judged by its own policy's variant (--policy-from).
+  builders = {n: types.SimpleNamespace(
+      config=hierarchy_config.HierarchyConfig(agent=agent))
+              for n, agent in zip(names, ('hrl', 'no_memory'))}
+  models = {n: (None, builders[n]) for n in names}
+  evaluate.check_reset_memory(('crosser',), models, 'run', {'pusher': 'b'})
+  with pytest.raises(ValueError, match="pusher's policy in b is agent "
+                     "'no_memory'"):
+    evaluate.check_reset_memory(names, models, 'run', {'pusher': 'b'})
+  with pytest.raises(ValueError, match=r"no species \['ant'\] in run"):
+    evaluate.check_reset_memory(('ant',), models, 'run', {})
 
 
 def test_the_stability_figures_are_logged_and_checkpointed(hrl_run):
