@@ -137,6 +137,13 @@ class PaperArgs:
   --stash), and no other cell starts: commit --partial and run the same
   command again to continue. A cell whose training ends in time is still
   evaluated (minutes)."""
+  finish_within: float = fields.field(0.0, fields.NON_NEGATIVE)
+  """Minutes past --hours that a cell it stops may take to finish: one
+  whose rest of training and evaluations fit in them at the pace it
+  measures (`finishes_within`) trains on, its training stopped at most
+  that long after --hours, and is evaluated and published instead of
+  stashed. 0: none. Leave that much of the session, and a margin, after
+  --hours."""
 
   def __post_init__(self):
     fields.check(self)
@@ -366,6 +373,20 @@ def estimate_rates(paces: dict[str, list[float]], agents
     return rates
   return {agent: rates.get(agent, rates['hrl'])
           for agent in dict.fromkeys(('hrl', *rates, *agents))}
+
+
+def finishes_within(cell: paper_plan.Cell, args: PaperArgs, env_steps: int,
+                    seconds: float) -> bool:
+  """Whether `cell`, stopped at `env_steps`, would end its training and
+  the evaluations of its final checkpoint within `seconds` at the pace
+  its run directory measures (`measured_pace`; the evaluations estimated
+  at that pace too, `paper_plan.estimated_seconds`); False without one."""
+  pace = measured_pace(cell, args)
+  if pace is None:
+    return False
+  left = max(budget(cell, args) - env_steps, 0)
+  return paper_plan.estimated_seconds(cell, left, args.episodes,
+                                      pace * cell.ants) <= seconds
 
 
 def dry_run(args: PaperArgs, plan=None) -> str:
@@ -612,6 +633,15 @@ def run_cell(cell: paper_plan.Cell, args: PaperArgs,
     summary = learner_loop.train(
         train_args(cell, args, resume=state.state == 'partial'),
         deadline=deadline)
+    extra = args.finish_within * 60
+    if summary.get('stopped_by') == run_dir.DEADLINE and extra:
+      steps = status(cell, args).env_steps  # Its newest checkpoint's.
+      if finishes_within(cell, args, steps, extra):
+        log(f'{cell.path}: out of time at {steps / 1e6:.2f}M of '
+            f'{budget(cell, args) / 1e6:g}M; the rest fits in '
+            f'--finish-within {args.finish_within:g}: trains on')
+        summary = learner_loop.train(train_args(cell, args, resume=True),
+                                     deadline=run_dir.clock() + extra)
     if summary.get('stopped_by'):
       return summary['stopped_by']
   checkpoint = checkpoints.resolve(run_directory(cell, args))
@@ -634,6 +664,8 @@ def run_plan(args: PaperArgs, plan=None,
   None. Out of `--hours`, the cell it stopped is stashed and no other
   starts."""
   deadline = run_dir.clock() + args.hours * 3600 if args.hours else None
+  if args.finish_within and not args.hours:
+    raise ValueError('--finish-within is time past --hours: give --hours.')
   default = PaperArgs()
   if args.budget and (args.results == default.results
                       or args.runs == default.runs

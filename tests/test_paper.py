@@ -254,6 +254,53 @@ def test_out_of_hours_the_running_cell_stops_is_stashed_and_none_starts(
   assert paper.status(second, args).state == 'todo'
 
 
+def test_a_cell_that_fits_in_finish_within_trains_on_past_hours(
+    controller, tmp_path, monkeypatch, capsys):  # pylint: disable=redefined-outer-name
+  first, second = plan = [dataclasses.replace(cell, budget=4 * STEPS)
+                          for cell in _tiny_plan(controller)]
+  monkeypatch.setattr(paper_plan, 'PLAN', plan)
+  # The clock reads 0 until update 3 ends, then 1e9, past --hours.
+  clock = {'now': 0.0}
+  monkeypatch.setattr(run_dir, 'clock', lambda: clock['now'])
+  real_train = learner_loop.train
+
+  def train(args, deadline=None):
+    def on_update(update, *_):
+      if update == 3:
+        clock['now'] = 1e9
+    return real_train(args, on_update=on_update, deadline=deadline)
+  monkeypatch.setattr(learner_loop, 'train', train)
+  args = _args(tmp_path)
+  argv = [f'--{k}={v}' for k, v in dataclasses.asdict(args).items()
+          if k in ('results', 'runs', 'partial', 'actors', 'episodes',
+                   'eval_envs', 'baselines')] + ['--no-progress', '--hours',
+                                                 '2.5']
+  with pytest.raises(ValueError, match='--finish-within .*--hours'):
+    paper.run_plan(dataclasses.replace(args, finish_within=5.0))
+  # Minutes enough at its pace: the first cell ends in the extra time and
+  # is published; the second does not start.
+  with pytest.raises(SystemExit) as exit_info:
+    paper.main(argv + ['--finish-within', '30'])
+  out = capsys.readouterr().out
+  assert exit_info.value.code == paper.EXIT_OUT_OF_TIME
+  assert (f'{first.path}: out of time at {3 * STEPS / 1e6:.2f}M of '
+          f'{4 * STEPS / 1e6:g}M; the rest fits in --finish-within 30: '
+          'trains on') in out
+  assert paper.status(first, args).state == 'done'
+  assert [int(r['update']) for r in _rows(os.path.join(
+      paper.results_directory(first, args), 'metrics.csv'))] == [1, 2, 3, 4]
+  assert f'Out of time (--hours 2.5) before {second.path}.' in out
+  # Too few minutes for the rest: stopped and stashed as without it.
+  clock['now'] = 0.0
+  with pytest.raises(SystemExit) as exit_info:
+    paper.main(argv + ['--finish-within', '1e-6'])
+  out = capsys.readouterr().out
+  assert exit_info.value.code == paper.EXIT_OUT_OF_TIME
+  assert 'trains on' not in out
+  assert f'{second.path}: out of time (--hours 2.5); stashed in' in out
+  assert paper.status(second, args) == paper.Status('partial', 3 * STEPS)
+
+
 def test_a_deadline_stops_once_and_leaves_the_first_signal_graceful():
   with run_dir.GracefulStop() as stop:
     assert not stop.requested and stop.reason is None
