@@ -81,8 +81,14 @@ def _compare(case, outputs):
   # The feed-forward learner had no value or global-state statistics and
   # logged no learning rate or explained variance: the file has none.
   assert set(expected) <= set(outputs), sorted(set(expected) - set(outputs))
+  # XLA's CPU code rounds float32 sums differently from one CPU to another
+  # (the file's AMD EPYC against an Intel Xeon, 28 November 2026: up to
+  # 1.4e-6 absolute, 3e-5 relative on weights of ~0.01), so rtol 1e-6
+  # failed on the Xeon at a commit that passed on the EPYC. These bounds
+  # still fail 'hrl' for a learning rate 1% higher, a clip 5% wider or an
+  # entropy cost 10% higher (checked that day).
   for name, want in expected.items():
-    np.testing.assert_allclose(outputs[name], want, rtol=1e-6, atol=1e-7,
+    np.testing.assert_allclose(outputs[name], want, rtol=1e-4, atol=2e-6,
                                err_msg=name)
 
 
