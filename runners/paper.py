@@ -370,7 +370,7 @@ def estimate_rates(paces: dict[str, list[float]], agents
   empty without done `hrl` cells (`runners.paper_plan`'s constants)."""
   rates = {agent: statistics.median(values) for agent, values in paces.items()}
   if 'hrl' not in rates:
-    return rates
+    return {}
   return {agent: rates.get(agent, rates['hrl'])
           for agent in dict.fromkeys(('hrl', *rates, *agents))}
 
@@ -391,9 +391,9 @@ def finishes_within(cell: paper_plan.Cell, args: PaperArgs, env_steps: int,
 
 def dry_run(args: PaperArgs, plan=None) -> str:
   """The plan as text: per cell its status, budget, estimated remaining
-  wall time and command (estimated at the pace of the variant's done
-  cells, `estimate_rates`; without done `hrl` cells at
-  `runners.paper_plan`'s constants) (and, for a cell
+  wall time (at the pace of the variant's done cells, `estimate_rates`;
+  without done `hrl` cells at `runners.paper_plan`'s constants) and
+  command (and, for a cell
   that a coop-paper process runs, i.e. holds its `claim`, which one and the
   pace it measures); then the total at the estimate's rate and, where
   cells run, at the pace they make together."""
