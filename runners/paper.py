@@ -139,11 +139,12 @@ class PaperArgs:
   evaluated (minutes)."""
   finish_within: float = fields.field(0.0, fields.NON_NEGATIVE)
   """Minutes past --hours that a cell it stops may take to finish: one
-  whose rest of training and evaluations fit in them at the pace it
-  measures (`finishes_within`) trains on, its training stopped at most
-  that long after --hours, and is evaluated and published instead of
-  stashed. 0: none. Leave that much of the session, and a margin, after
-  --hours."""
+  whose rest of training and evaluations fit in what is left of them at
+  the pace it measures (`finishes_within`) trains on, its training
+  stopped at the latest M minutes after --hours, and is evaluated and
+  published instead of stashed (a signal meanwhile stops and stashes it).
+  The evaluations have no deadline and may take longer than estimated:
+  leave M minutes and a margin of the session after --hours. 0: none."""
 
   def __post_init__(self):
     fields.check(self)
@@ -365,13 +366,15 @@ def estimate_rates(paces: dict[str, list[float]], agents
                    ) -> dict[str, float]:
   """{variant: Ant steps/s the estimate takes}, for `paces`' variants and
   `agents`: the median of the variant's done cells (`done_pace`); a
-  variant with none at `hrl`'s (`mappo` and
-  `no_memory` ran at or above it in short probes, docs/performance.md);
+  variant with none at `hrl`'s times its `paper_plan.VARIANT_SPEED` (1 for
+  `mappo`, which ran at or above `hrl`'s rate in short probes,
+  docs/performance.md);
   empty without done `hrl` cells (`runners.paper_plan`'s constants)."""
   rates = {agent: statistics.median(values) for agent, values in paces.items()}
   if 'hrl' not in rates:
     return {}
-  return {agent: rates.get(agent, rates['hrl'])
+  return {agent: rates.get(agent, rates['hrl']
+                          * paper_plan.VARIANT_SPEED.get(agent, 1.0))
           for agent in dict.fromkeys(('hrl', *rates, *agents))}
 
 
@@ -636,12 +639,18 @@ def run_cell(cell: paper_plan.Cell, args: PaperArgs,
     extra = args.finish_within * 60
     if summary.get('stopped_by') == run_dir.DEADLINE and extra:
       steps = status(cell, args).env_steps  # Its newest checkpoint's.
-      if finishes_within(cell, args, steps, extra):
+      if finishes_within(cell, args, steps,
+                         deadline + extra - run_dir.clock()):
         log(f'{cell.path}: out of time at {steps / 1e6:.2f}M of '
             f'{budget(cell, args) / 1e6:g}M; the rest fits in '
             f'--finish-within {args.finish_within:g}: trains on')
         summary = learner_loop.train(train_args(cell, args, resume=True),
-                                     deadline=run_dir.clock() + extra)
+                                     deadline=deadline + extra)
+        if summary.get('stopped_by') not in (None, run_dir.DEADLINE):
+          # Past --hours a signal stashes it too, keeping its exit status.
+          folder = stash(cell, args)
+          log(f'{cell.path}: stopped by {summary["stopped_by"]} past '
+              f'--hours; stashed in {folder}: commit it')
     if summary.get('stopped_by'):
       return summary['stopped_by']
   checkpoint = checkpoints.resolve(run_directory(cell, args))

@@ -259,7 +259,8 @@ def test_a_cell_that_fits_in_finish_within_trains_on_past_hours(
   first, second = plan = [dataclasses.replace(cell, budget=4 * STEPS)
                           for cell in _tiny_plan(controller)]
   monkeypatch.setattr(paper_plan, 'PLAN', plan)
-  # The clock reads 0 until update 3 ends, then 1e9, past --hours.
+  # The clock reads 0 until update 3 ends, then 1 s past --hours: the
+  # extra minutes count from --hours.
   clock = {'now': 0.0}
   monkeypatch.setattr(run_dir, 'clock', lambda: clock['now'])
   real_train = learner_loop.train
@@ -267,7 +268,7 @@ def test_a_cell_that_fits_in_finish_within_trains_on_past_hours(
   def train(args, deadline=None):
     def on_update(update, *_):
       if update == 3:
-        clock['now'] = 1e9
+        clock['now'] = 2.5 * 3600 + 1
     return real_train(args, on_update=on_update, deadline=deadline)
   monkeypatch.setattr(learner_loop, 'train', train)
   args = _args(tmp_path)

@@ -4,6 +4,7 @@ import concurrent.futures
 import csv
 import dataclasses
 import os
+import re
 import shutil
 import signal
 import threading
@@ -167,7 +168,7 @@ def test_variant_trains_in_process(agent, controller, hrl_run, tmp_path):
   if agent == 'no_memory':  # Refused before the first model plays.
     heard = []
     with pytest.raises(ValueError, match='--reset-memory: ant.s policy in '
-                       f'{logdir} .*carries no memory'):
+                       f'{re.escape(logdir)} .*carries no memory'):
       evaluate.evaluate(evaluate.EvalArgs(checkpoint=(hrl_run, logdir),
                                           episodes=1, envs=1,
                                           reset_memory=('ant',)),
