@@ -435,7 +435,10 @@ def dry_run(args: PaperArgs, plan=None) -> str:
         'the pace of the done cells (Ant steps/s, median of the '
         'variant\'s: ' + ', '.join(
             f'{agent} {rate:,.0f} of {len(paces[agent])}' if agent in paces
-            else f'{agent} at hrl\'s' for agent, rate in rates.items())
+            else f'{agent} at hrl\'s' + (
+                f' x {paper_plan.VARIANT_SPEED[agent]:g}'
+                if agent in paper_plan.VARIANT_SPEED else '')
+            for agent, rate in rates.items())
         + '; as they ran, beside what ran with them)')
   else:
     lines.append(f'{len(cells)} cells, ~{total / 3600:.0f} h to go at '
