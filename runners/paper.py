@@ -366,15 +366,15 @@ def estimate_rates(paces: dict[str, list[float]], agents
                    ) -> dict[str, float]:
   """{variant: Ant steps/s the estimate takes}, for `paces`' variants and
   `agents`: the median of the variant's done cells (`done_pace`); a
-  variant with none at `hrl`'s times its `paper_plan.VARIANT_SPEED` (1 for
-  `mappo`, which ran at or above `hrl`'s rate in short probes,
-  docs/performance.md);
-  empty without done `hrl` cells (`runners.paper_plan`'s constants)."""
+  variant with none at `hrl`'s times its share (`paper_plan.variant_rate`;
+  1 for `mappo`, which ran at or above `hrl`'s rate in short probes,
+  docs/performance.md); empty without done `hrl` cells
+  (`runners.paper_plan`'s constants)."""
   rates = {agent: statistics.median(values) for agent, values in paces.items()}
   if 'hrl' not in rates:
     return {}
-  return {agent: rates.get(agent, rates['hrl']
-                          * paper_plan.VARIANT_SPEED.get(agent, 1.0))
+  return {agent: rates.get(agent, paper_plan.variant_rate(agent,
+                                                          rates['hrl']))
           for agent in dict.fromkeys(('hrl', *rates, *agents))}
 
 

@@ -286,5 +286,12 @@ def estimated_rate(cell: Cell, ant_rate: Optional[float] = None) -> float:
   `coop-paper --dry-run` measures), else `AGENT_STEPS_PER_SECOND` times the
   variant's `VARIANT_SPEED`, over the Ants of a copy."""
   if ant_rate is None:
-    ant_rate = AGENT_STEPS_PER_SECOND * VARIANT_SPEED.get(cell.agent, 1.0)
+    ant_rate = variant_rate(cell.agent)
   return ant_rate / cell.ants
+
+
+def variant_rate(agent: str, hrl_rate: float = AGENT_STEPS_PER_SECOND
+                 ) -> float:
+  """Ant steps/s of `agent`'s cells from `hrl`'s (`hrl_rate`): times the
+  variant's `VARIANT_SPEED`."""
+  return hrl_rate * VARIANT_SPEED.get(agent, 1.0)
