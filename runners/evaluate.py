@@ -84,8 +84,8 @@ class EvalArgs:
   recurrent policy with what it carries between commands taken away
   (`ant`; the ravine's `crosser`, `pusher` or both; `hrl` and `mappo`
   only, the variants that carry one). Kept in each model's figures that
-  `evaluate` returns; the `--json` file's layout has no place for it, so
-  keep a probe's files apart (as `--option`'s)."""
+  `evaluate` returns and in the `--json` file's algorithm name
+  (`hrl+reset_memory=crosser`, `marl_eval.algorithm_name`)."""
   stage: str = ''
   """Curriculum stage of the task (ravine: joint, pushers, crossers;
   transport: joint, push); empty for the training one."""
@@ -520,6 +520,9 @@ def evaluate(args: EvalArgs, log=None) -> dict:
                       'agent': config.agent,
                       'seed': config.seed,
                       'options': args.task_options(),
+                      'stochastic': args.stochastic,
+                      'time_limit': args.time_limit,
+                      'n_pushers': args.n_pushers,
                       'reset_memory': list(args.reset_memory),
                       'policy_from': state['policy_from'],
                       'episodes': [metrics_lib.episode_figures(e)

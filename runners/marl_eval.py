@@ -11,7 +11,10 @@ data") aggregates raw results of this form:
 What we fill (`layout`): env_name `coop_suite`; task_name the evaluation
 task and population, `<task>_n<N>` (ravine: N crossers; a curriculum
 stage other than joint adds it, `ravine_pushers_n2`, `transport_push_n4`); algorithm_name the variant
-(`hrl`, `no_memory`, `flat`, `mappo`); run_name `seed_<training seed>` (as
+(`hrl`, `no_memory`, `flat`, `mappo`), with how `coop-eval` played it
+where that is not the protocol's (`algorithm_name`:
+`hrl+reset_memory=crosser`, `flat+stochastic`,
+`hrl+time_limit=60`, `hrl+stone_in_path_probability=1`); run_name `seed_<training seed>` (as
 BenchMARL names runs); one logging step per model, `step_<update>` of
 the evaluated checkpoint, with `step_count` its environment steps (0.05 s
 control steps of one environment copy) and every numeric episode figure
@@ -21,6 +24,7 @@ that checkpoint's lists, because the protocol evaluates the final
 checkpoint, declared before evaluation (marl-eval's absolute metric, the
 best checkpoint evaluated on 10x the episodes, is not what we report).
 """
+import json
 from typing import Any, Iterable
 
 ENV_NAME = 'coop_suite'
@@ -33,13 +37,35 @@ def task_name(task: str, n_agents: int, stage: str = '') -> str:
   return f'{task}{stage}_n{n_agents}'
 
 
+def algorithm_name(model: dict[str, Any]) -> str:
+  """The model's variant (`agent`), then a `+<tag>` for each way its
+  evaluation left the protocol's (the final checkpoint's mean commands on
+  its training task), in this order: `stochastic` (sampled commands),
+  `reset_memory=<species,...>`, `policy_from=<species,...>`, the task's
+  `time_limit=<s>` and `n_pushers=<N>` when given, and each task option
+  `<key>=<JSON value>`. A probe's runs thus stay apart from the protocol's
+  in marl-eval's tables, while `coop-compare` still pairs them by task
+  and run."""
+  tags = ['stochastic'] if model.get('stochastic') else []
+  for key in ('reset_memory', 'policy_from'):
+    if model.get(key):
+      tags.append(f'{key}={",".join(model[key])}')
+  for key in ('time_limit', 'n_pushers'):
+    if model.get(key):
+      tags.append(f'{key}={model[key]:g}')
+  tags += [f'{key}={json.dumps(value, separators=(",", ":"))}'
+           for key, value in (model.get('options') or {}).items()]
+  return '+'.join([model['agent'], *tags])
+
+
 def layout(models: Iterable[dict[str, Any]]) -> dict[str, Any]:
   """The marl-eval dict of evaluated models.
 
   Args:
     models: one dict per model with 'task', 'n_agents', 'stage', 'agent',
       'seed' (the training seed), 'update', 'env_steps' and 'episodes'
-      (one `metrics.episode_figures` dict per evaluation episode), as
+      (one `metrics.episode_figures` dict per evaluation episode), and
+      how it was played where it records it (`algorithm_name`), as
       `runners.evaluate.evaluate` returns them under 'models'.
 
   Returns:
@@ -50,7 +76,7 @@ def layout(models: Iterable[dict[str, Any]]) -> dict[str, Any]:
   for model in models:
     runs = data.setdefault(ENV_NAME, {}).setdefault(
         task_name(model['task'], model['n_agents'], model.get('stage', '')),
-        {}).setdefault(model['agent'], {})
+        {}).setdefault(algorithm_name(model), {})
     run = f'seed_{model["seed"]}'
     copy = 2
     while run in runs:

@@ -35,6 +35,7 @@ docs/paper.md.
 import contextlib
 import csv
 import dataclasses
+import json
 import math
 import os
 import shutil
@@ -319,12 +320,14 @@ rate over (metrics.csv's `wall_time`); a metrics.csv not written for this
 long is not taken as running."""
 
 
-def measured_pace(cell: paper_plan.Cell, args: PaperArgs
-                  ) -> Optional[float]:
+def measured_pace(cell: paper_plan.Cell, args: PaperArgs,
+                  since_steps: int = -1) -> Optional[float]:
   """The env steps/s of the running `cell` over its last `PACE_WINDOW`
   seconds of updates (its run directory's metrics.csv: env steps over the
   updates' wall time, which leaves out the ~1-2% between updates), or None
-  without a fresh metrics.csv holding 3 rows in that window."""
+  without a fresh metrics.csv holding 3 rows in that window. With
+  `since_steps` (where this process resumed it), only the rows past it:
+  a resumed run's earlier rows ran elsewhere, maybe at another pace."""
   logdir = run_directory(cell, args)
   try:
     if time.time() - os.path.getmtime(os.path.join(logdir, run_dir.METRICS)
@@ -333,7 +336,8 @@ def measured_pace(cell: paper_plan.Cell, args: PaperArgs
     rows = run_dir.read_metrics(logdir)
   except (OSError, ValueError, csv.Error):
     return None
-  rows = [r for r in rows if 'env_steps' in r and 'wall_time' in r]
+  rows = [r for r in rows if 'env_steps' in r and 'wall_time' in r
+          and r['env_steps'] > since_steps]
   window = [r for r in rows
             if rows[-1]['wall_time'] - r['wall_time'] <= PACE_WINDOW]
   if len(window) < 3 or window[-1]['wall_time'] <= window[0]['wall_time']:
@@ -349,7 +353,7 @@ def done_pace(args: PaperArgs, plan=None) -> dict[str, list[float]]:
   committed metrics.csv's last row; resumed runs count on), whatever the
   machine and whatever ran beside it."""
   paces = {}
-  for cell in plan or paper_plan.PLAN:
+  for cell in paper_plan.PLAN if plan is None else plan:
     if not is_done(cell, args):
       continue
     try:
@@ -359,6 +363,28 @@ def done_pace(args: PaperArgs, plan=None) -> dict[str, list[float]]:
     if last.get('wall_time', 0) > 0 and last.get('env_steps', 0) > 0:
       paces.setdefault(cell.agent, []).append(
           last['env_steps'] * cell.ants / last['wall_time'])
+  return paces
+
+
+def done_eval_pace(args: PaperArgs, plan=None) -> list[float]:
+  """The Ant steps/s of the done cells' evaluations that measured their
+  wall time (their eval JSON's `eval_seconds`), in full-length episodes
+  (`paper_plan.eval_ant_steps`, the estimates' measure)."""
+  paces = []
+  for cell in paper_plan.PLAN if plan is None else plan:
+    if not is_done(cell, args):
+      continue
+    for n in cell.populations:
+      path = os.path.join(results_directory(cell, args), EVAL_FILE.format(n))
+      try:
+        with open(path) as f:
+          figures = json.load(f)
+      except (OSError, ValueError):
+        continue
+      seconds = figures.get('eval_seconds', 0)
+      if seconds > 0:
+        paces.append(paper_plan.eval_ant_steps(
+            cell, n, figures.get('episodes', args.episodes)) / seconds)
   return paces
 
 
@@ -378,18 +404,28 @@ def estimate_rates(paces: dict[str, list[float]], agents
           for agent in dict.fromkeys(('hrl', *rates, *agents))}
 
 
+def eval_rate(args: PaperArgs, plan=None) -> Optional[float]:
+  """The median of `done_eval_pace`, or None without one (the estimates
+  then take the training's rate)."""
+  paces = done_eval_pace(args, plan)
+  return statistics.median(paces) if paces else None
+
+
 def finishes_within(cell: paper_plan.Cell, args: PaperArgs, env_steps: int,
-                    seconds: float) -> bool:
+                    seconds: float, since_steps: int = -1) -> bool:
   """Whether `cell`, stopped at `env_steps`, would end its training and
-  the evaluations of its final checkpoint within `seconds` at the pace
-  its run directory measures (`measured_pace`; the evaluations estimated
-  at that pace too, `paper_plan.estimated_seconds`); False without one."""
-  pace = measured_pace(cell, args)
+  the evaluations of its final checkpoint within `seconds`: the training
+  at the pace its run directory measures past `since_steps`
+  (`measured_pace`), the evaluations at the done cells' (`eval_rate`,
+  else at that pace too; `paper_plan.estimated_seconds`). False without a
+  measured pace."""
+  pace = measured_pace(cell, args, since_steps)
   if pace is None:
     return False
   left = max(budget(cell, args) - env_steps, 0)
   return paper_plan.estimated_seconds(cell, left, args.episodes,
-                                      pace * cell.ants) <= seconds
+                                      pace * cell.ants,
+                                      eval_rate(args)) <= seconds
 
 
 def dry_run(args: PaperArgs, plan=None) -> str:
@@ -406,13 +442,15 @@ def dry_run(args: PaperArgs, plan=None) -> str:
   cells = selected(args, plan)
   paces = done_pace(args, plan)
   rates = estimate_rates(paces, [cell.agent for cell in cells])
+  evaluating = eval_rate(args, plan)
   for cell in cells:
     state = status(cell, args)
     steps = budget(cell, args)
     remaining = {'done': None, 'trained': 0, 'foreign': steps}.get(
         state.state, steps - state.env_steps)
     seconds = 0.0 if remaining is None else paper_plan.estimated_seconds(
-        cell, max(remaining, 0), args.episodes, rates.get(cell.agent))
+        cell, max(remaining, 0), args.episodes, rates.get(cell.agent),
+        evaluating)
     total += seconds
     lines.append(f'{cell.path:32s} {state.describe(steps):22s} '
                  f'{steps / 1e6:6g}M  ~{seconds / 3600:6.1f} h  '
@@ -447,6 +485,10 @@ def dry_run(args: PaperArgs, plan=None) -> str:
                              for agent, share in
                              paper_plan.VARIANT_SPEED.items())
                  + ' (runners.paper_plan)')
+  if evaluating:
+    lines.append(f'  evaluations at {evaluating:,.0f} Ant steps/s of '
+                 'full-length episodes (median of the done ones that '
+                 'measured their wall time)')
   if pace:
     running = f'the {len(pace)} cells' if len(pace) > 1 else 'the cell'
     together = ' together' if len(pace) > 1 else ''
@@ -464,6 +506,7 @@ def evaluate_cell(cell: paper_plan.Cell, checkpoint: str, args: PaperArgs,
   from runners import marl_eval  # pylint: disable=g-import-not-at-top
   out = {}
   for n in cell.populations:
+    started = time.monotonic()
     result = evaluate.evaluate(evaluate.EvalArgs(
         checkpoint=(checkpoint,), episodes=args.episodes,
         seeds=(args.eval_seed,), envs=args.eval_envs,
@@ -479,6 +522,7 @@ def evaluate_cell(cell: paper_plan.Cell, checkpoint: str, args: PaperArgs,
         'update': model['update'], 'env_steps': model['env_steps'],
         'budget': budget(cell, args), 'episodes': result['episodes'],
         'eval_seed': args.eval_seed,
+        'eval_seconds': round(time.monotonic() - started, 1),
         **{k: result[k] for k in ('success', 'success_se', 'return',
                                   'return_se')},
         'train_command': command(cell, args),
@@ -643,17 +687,13 @@ def run_cell(cell: paper_plan.Cell, args: PaperArgs,
     if summary.get('stopped_by') == run_dir.DEADLINE and extra:
       steps = status(cell, args).env_steps  # Its newest checkpoint's.
       if finishes_within(cell, args, steps,
-                         deadline + extra - run_dir.clock()):
+                         deadline + extra - run_dir.clock(),
+                         since_steps=state.env_steps):
         log(f'{cell.path}: out of time at {steps / 1e6:.2f}M of '
             f'{budget(cell, args) / 1e6:g}M; the rest fits in '
             f'--finish-within {args.finish_within:g}: trains on')
         summary = learner_loop.train(train_args(cell, args, resume=True),
                                      deadline=deadline + extra)
-        if summary.get('stopped_by') not in (None, run_dir.DEADLINE):
-          # Past --hours a signal stashes it too, keeping its exit status.
-          folder = stash(cell, args)
-          log(f'{cell.path}: stopped by {summary["stopped_by"]} past '
-              f'--hours; stashed in {folder}: commit it')
     if summary.get('stopped_by'):
       return summary['stopped_by']
   checkpoint = checkpoints.resolve(run_directory(cell, args))
@@ -725,11 +765,17 @@ def _run_in_turn(args: PaperArgs, cells: list[paper_plan.Cell],
       try:
         with claim(cell, args):
           stopped = run_cell(cell, args, log, deadline)
-          if stopped == run_dir.DEADLINE:
+          # Out of time, or stopped by a signal past --hours (in
+          # --finish-within's minutes, keeping its exit status): stashed.
+          if stopped == run_dir.DEADLINE or (
+              stopped and deadline and run_dir.clock() >= deadline):
             folder = stash(cell, args)
             if not folder:  # Stopped before its first update: afresh.
               shutil.rmtree(run_directory(cell, args), ignore_errors=True)
-            log(f'{cell.path}: out of time (--hours {args.hours:g}); '
+            why = (f'out of time (--hours {args.hours:g})'
+                   if stopped == run_dir.DEADLINE
+                   else f'stopped by {stopped} past --hours')
+            log(f'{cell.path}: {why}; '
                 + (f'stashed in {folder}: commit it' if folder
                    else 'no update yet, nothing to stash'))
       except CellTaken as taken:

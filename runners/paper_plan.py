@@ -270,14 +270,25 @@ PLAN = paper_plan()
 
 
 def estimated_seconds(cell: Cell, steps: int, episodes: int = EPISODES,
-                      ant_rate: Optional[float] = None) -> float:
-  """Estimated wall time (s) of `steps` training steps of `cell` plus the
-  evaluations of its final checkpoint, at `estimated_rate`."""
-  steps_per_episode = EPISODE_SECONDS / CONTROL_TIMESTEP
-  ant_steps = steps * cell.ants + sum(
-      episodes * steps_per_episode * (cell.ants - cell.n_agents + n)
-      for n in cell.populations)
-  return ant_steps / (estimated_rate(cell, ant_rate) * cell.ants)
+                      ant_rate: Optional[float] = None,
+                      eval_rate: Optional[float] = None) -> float:
+  """Estimated wall time (s) of `steps` training steps of `cell` at
+  `estimated_rate` plus the evaluations of its final checkpoint at
+  `eval_rate` (Ant steps/s of full-length episodes, `eval_ant_steps`; e.g.
+  the done cells' measured evaluations), else at the training's rate."""
+  rate = estimated_rate(cell, ant_rate) * cell.ants
+  evaluations = sum(eval_ant_steps(cell, n, episodes)
+                    for n in cell.populations)
+  return steps * cell.ants / rate + evaluations / (eval_rate or rate)
+
+
+def eval_ant_steps(cell: Cell, n_agents: int,
+                   episodes: int = EPISODES) -> float:
+  """Ant steps of `episodes` full-length episodes of `cell`'s final
+  checkpoint with `n_agents` (the estimates' measure of an evaluation;
+  an episode that succeeds ends sooner)."""
+  return (episodes * EPISODE_SECONDS / CONTROL_TIMESTEP
+          * (cell.ants - cell.n_agents + n_agents))
 
 
 def estimated_rate(cell: Cell, ant_rate: Optional[float] = None) -> float:

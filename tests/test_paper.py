@@ -19,6 +19,7 @@ from agents.hierarchy import config as hierarchy_config
 from runners import actor_pool
 from runners import checkpoints
 from runners import cli
+from runners import compare
 from runners import config as config_lib
 from runners import evaluate
 from runners import learner_loop
@@ -300,6 +301,41 @@ def test_a_cell_that_fits_in_finish_within_trains_on_past_hours(
   assert 'trains on' not in out
   assert f'{second.path}: out of time (--hours 2.5); stashed in' in out
   assert paper.status(second, args) == paper.Status('partial', 3 * STEPS)
+
+
+def test_a_signal_past_hours_stashes_the_cell_with_its_exit_status(
+    controller, tmp_path, monkeypatch, capsys):  # pylint: disable=redefined-outer-name
+  first = dataclasses.replace(_tiny_plan(controller)[0], budget=6 * STEPS)
+  monkeypatch.setattr(paper_plan, 'PLAN', [first])
+  # Past --hours after update 3; trains on in --finish-within's minutes
+  # until SIGINT in update 4.
+  clock = {'now': 0.0}
+  monkeypatch.setattr(run_dir, 'clock', lambda: clock['now'])
+  real_train = learner_loop.train
+
+  def train(args, deadline=None):
+    def on_update(update, *_):
+      if update == 3:
+        clock['now'] = 2.5 * 3600 + 1
+      if update == 4:
+        os.kill(os.getpid(), signal.SIGINT)
+    return real_train(args, on_update=on_update, deadline=deadline)
+  monkeypatch.setattr(learner_loop, 'train', train)
+  args = _args(tmp_path)
+  argv = [f'--{k}={v}' for k, v in dataclasses.asdict(args).items()
+          if k in ('results', 'runs', 'partial', 'actors', 'episodes',
+                   'eval_envs', 'baselines')]
+  with pytest.raises(SystemExit) as exit_info:
+    paper.main(argv + ['--no-progress', '--hours', '2.5',
+                       '--finish-within', '30'])
+  out = capsys.readouterr().out
+  assert exit_info.value.code == 128 + signal.SIGINT
+  assert 'trains on' in out
+  stashed = paper.partial_directory(first, args)
+  assert (f'{first.path}: stopped by SIGINT past --hours; stashed in '
+          f'{stashed}: commit it') in out
+  assert os.listdir(os.path.join(stashed, 'checkpoints')) == ['4']
+  assert paper.status(first, args) == paper.Status('partial', 4 * STEPS)
 
 
 def test_a_deadline_stops_once_and_leaves_the_first_signal_graceful():
@@ -611,6 +647,65 @@ def test_dry_run_measures_the_pace_of_the_cells_running_now(tmp_path):
     with open(os.path.join(logdir, 'metrics.csv'), 'w') as f:
       f.write(text)
     assert paper.measured_pace(crossers, args) is None
+
+
+def test_finishes_within_judges_this_runs_pace_and_the_done_evaluations(
+    tmp_path):
+  """The rest of the training at the pace of the updates past where this
+  process resumed it, the evaluations at the done cells' measured pace;
+  the fit is exact to the second (a minutes/seconds slip fails it)."""
+  crossers, corridor = _plan_cells('ravine/hrl/crossers/n2/s1',
+                                   'corridor/hrl/n4/s0')
+  args = _args(tmp_path, episodes=100)
+  logdir = paper.run_directory(crossers, args)
+  os.makedirs(logdir)
+  # An earlier session: 1,000 env steps/s up to 1M steps; this one (resumed
+  # at 1M): 4,000 env steps/s, over 3 updates.
+  with open(os.path.join(logdir, 'metrics.csv'), 'w') as f:
+    f.write('update,env_steps,wall_time\n'
+            '1,800000,800\n2,1000000,1000\n'
+            '3,1400000,1100\n4,1800000,1200\n5,2200000,1300\n')
+  budget = paper.budget(crossers, args)
+  left = budget - 2_200_000
+  # No done evaluation measured: they go at the training's pace too.
+  evaluations = paper_plan.estimated_seconds(crossers, 0, 100,
+                                             4_000 * crossers.ants)
+  exact = left / 4_000 + evaluations
+  assert paper.finishes_within(crossers, args, 2_200_000, exact + 1e-6,
+                               since_steps=1_000_000)
+  assert not paper.finishes_within(crossers, args, 2_200_000, exact - 1,
+                                   since_steps=1_000_000)
+  # Every row, the first session's with them: a slower pace, no fit.
+  assert not paper.finishes_within(crossers, args, 2_200_000, exact + 1e-6)
+  # Fewer than 3 rows past the resume: no pace, no fit.
+  assert not paper.finishes_within(crossers, args, 2_200_000, 1e9,
+                                   since_steps=1_400_000)
+  # A done cell whose evaluations took 600 s and 300 s (one without a
+  # wall time counts for nothing): its median pace for the evaluations.
+  _commit(corridor, args, {n: [1] for n in corridor.populations})
+  for n, seconds in zip(corridor.populations, (600, 300, None, 300)):
+    path = os.path.join(paper.results_directory(corridor, args),
+                        paper.EVAL_FILE.format(n))
+    with open(path) as f:
+      figures = json.load(f)
+    figures.update(episodes=100, **({'eval_seconds': seconds} if seconds
+                                     else {}))
+    evaluate.write_json(path, figures)
+  paces = sorted(paper.done_eval_pace(args, [corridor]))
+  assert paces == sorted(
+      paper_plan.eval_ant_steps(corridor, n, 100) / seconds
+      for n, seconds in ((4, 600), (2, 300), (5, 300)))
+  slower = left / 4_000 + sum(
+      paper_plan.eval_ant_steps(crossers, n, 100)
+      for n in crossers.populations) / paces[1]
+  assert paper.eval_rate(args) == paces[1]
+  assert paper.finishes_within(crossers, args, 2_200_000, slower + 1e-6,
+                               since_steps=1_000_000)
+  assert not paper.finishes_within(crossers, args, 2_200_000, slower - 1,
+                                   since_steps=1_000_000)
+  assert paper.dry_run(args, [crossers, corridor]).splitlines()[-1] == (
+      f'  evaluations at {paces[1]:,.0f} Ant steps/s of full-length '
+      'episodes (median of the done ones that measured their wall time)')
 
 
 class _FakeCellProcess:
@@ -1001,6 +1096,20 @@ def test_eval_json_follows_marl_eval_layout(tiny_run, tmp_path, capsys):
     assert all(len(step[k]) == 3 for k in metrics)
     assert all(v in (0.0, 1.0) for v in step['success'])
     assert sorted(run['absolute_metrics']) == metrics
+  # A probe's runs are named apart, in algorithm_name's order; coop-compare
+  # still pairs them with the protocol's episodes.
+  probe = tmp_path / 'probe.json'
+  evaluate.main(['--checkpoint', tiny_run, '--episodes', '3', '--envs', '2',
+                 '--option', 'target_radius=1.5', '--reset-memory', 'ant',
+                 '--time-limit', '0.8', '--stochastic', '--json', str(probe)])
+  played = json.loads(probe.read_text())
+  marl_eval.check(played)
+  assert list(played['coop_suite']['transport_n2']) == [
+      'hrl+stochastic+reset_memory=ant+time_limit=0.8+target_radius=1.5']
+  capsys.readouterr()
+  compared = compare.compare(compare.CompareArgs(
+      evaluations=(str(path), str(probe))))
+  assert compared['models'][-1]['episodes'] == 3
   # What check() refuses.
   broken = json.loads(path.read_text())
   run = broken['coop_suite']['transport_n2']['hrl']['seed_0']
