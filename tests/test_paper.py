@@ -205,9 +205,7 @@ def test_out_of_hours_the_running_cell_stops_is_stashed_and_none_starts(
     return real_train(args, on_update=on_update, deadline=deadline)
   monkeypatch.setattr(learner_loop, 'train', train)
   args = _args(tmp_path)
-  argv = [f'--{k}={v}' for k, v in dataclasses.asdict(args).items()
-          if k in ('results', 'runs', 'partial', 'actors', 'episodes',
-                   'eval_envs', 'baselines')] + ['--no-progress']
+  argv = _argv(args)
 
   def run(*flags):
     clock['now'] = 0.0
@@ -255,28 +253,40 @@ def test_out_of_hours_the_running_cell_stops_is_stashed_and_none_starts(
   assert paper.status(second, args).state == 'todo'
 
 
-def test_a_cell_that_fits_in_finish_within_trains_on_past_hours(
-    controller, tmp_path, monkeypatch, capsys):  # pylint: disable=redefined-outer-name
-  first, second = plan = [dataclasses.replace(cell, budget=4 * STEPS)
-                          for cell in _tiny_plan(controller)]
-  monkeypatch.setattr(paper_plan, 'PLAN', plan)
-  # The clock reads 0 until update 3 ends, then 1 s past --hours: the
-  # extra minutes count from --hours.
+def _hours_pass_after(monkeypatch, update, signal_after=None):
+  """Training's deadline clock reads 0 until `update` ends, then 1 s past
+  `--hours 2.5` (--finish-within's minutes count from --hours); SIGINT
+  as update `signal_after` ends. Returns the clock ({'now': seconds})."""
   clock = {'now': 0.0}
   monkeypatch.setattr(run_dir, 'clock', lambda: clock['now'])
   real_train = learner_loop.train
 
   def train(args, deadline=None):
-    def on_update(update, *_):
-      if update == 3:
+    def on_update(done, *_):
+      if done == update:
         clock['now'] = 2.5 * 3600 + 1
+      if done == signal_after:
+        os.kill(os.getpid(), signal.SIGINT)
     return real_train(args, on_update=on_update, deadline=deadline)
   monkeypatch.setattr(learner_loop, 'train', train)
-  args = _args(tmp_path)
-  argv = [f'--{k}={v}' for k, v in dataclasses.asdict(args).items()
+  return clock
+
+
+def _argv(args):
+  """coop-paper's flags for `_args`' folders and machine settings."""
+  return [f'--{k}={v}' for k, v in dataclasses.asdict(args).items()
           if k in ('results', 'runs', 'partial', 'actors', 'episodes',
-                   'eval_envs', 'baselines')] + ['--no-progress', '--hours',
-                                                 '2.5']
+                   'eval_envs', 'baselines')] + ['--no-progress']
+
+
+def test_a_cell_that_fits_in_finish_within_trains_on_past_hours(
+    controller, tmp_path, monkeypatch, capsys):  # pylint: disable=redefined-outer-name
+  first, second = plan = [dataclasses.replace(cell, budget=4 * STEPS)
+                          for cell in _tiny_plan(controller)]
+  monkeypatch.setattr(paper_plan, 'PLAN', plan)
+  clock = _hours_pass_after(monkeypatch, 3)
+  args = _args(tmp_path)
+  argv = _argv(args) + ['--hours', '2.5']
   with pytest.raises(ValueError, match='--finish-within .*--hours'):
     paper.run_plan(dataclasses.replace(args, finish_within=5.0))
   # Minutes enough at its pace: the first cell ends in the extra time and
@@ -309,25 +319,10 @@ def test_a_signal_past_hours_stashes_the_cell_with_its_exit_status(
   monkeypatch.setattr(paper_plan, 'PLAN', [first])
   # Past --hours after update 3; trains on in --finish-within's minutes
   # until SIGINT in update 4.
-  clock = {'now': 0.0}
-  monkeypatch.setattr(run_dir, 'clock', lambda: clock['now'])
-  real_train = learner_loop.train
-
-  def train(args, deadline=None):
-    def on_update(update, *_):
-      if update == 3:
-        clock['now'] = 2.5 * 3600 + 1
-      if update == 4:
-        os.kill(os.getpid(), signal.SIGINT)
-    return real_train(args, on_update=on_update, deadline=deadline)
-  monkeypatch.setattr(learner_loop, 'train', train)
+  _hours_pass_after(monkeypatch, 3, signal_after=4)
   args = _args(tmp_path)
-  argv = [f'--{k}={v}' for k, v in dataclasses.asdict(args).items()
-          if k in ('results', 'runs', 'partial', 'actors', 'episodes',
-                   'eval_envs', 'baselines')]
   with pytest.raises(SystemExit) as exit_info:
-    paper.main(argv + ['--no-progress', '--hours', '2.5',
-                       '--finish-within', '30'])
+    paper.main(_argv(args) + ['--hours', '2.5', '--finish-within', '30'])
   out = capsys.readouterr().out
   assert exit_info.value.code == 128 + signal.SIGINT
   assert 'trains on' in out
