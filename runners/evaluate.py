@@ -33,6 +33,7 @@ it is played, headless, one frame per control step, with
 positions and figures per control step to a CSV. `--json` writes every
 episode's figures in marl-eval's layout (`runners.marl_eval`).
 """
+import collections
 import csv
 import dataclasses
 import json
@@ -385,6 +386,17 @@ def play(spec, config, models, seed: int, episodes: int, num_envs: int,
   return [e for r in results for e in r]
 
 
+def copy_steps(episodes: list[dict]) -> int:
+  """The control steps of all copies that played `play`'s `episodes`:
+  every copy steps until the busiest one has played its share, so the
+  copies times that one's steps (the work done, the copies that finished
+  first stepping on idle)."""
+  steps = collections.Counter()
+  for episode in episodes:
+    steps[episode['env']] += episode.get('control_steps', 0)
+  return len(steps) * max(steps.values(), default=0)
+
+
 class _Recording:
   """A bare environment that films itself into the mp4 `video` and/or
   writes its positions and figures into the CSV `trace` (either may be
@@ -478,7 +490,8 @@ def mean_and_error(values):
 
 def evaluate(args: EvalArgs, log=None) -> dict:
   """Plays every model x seed; returns the figures that `main` prints,
-  and under 'models' each model's episodes (`metrics.episode_figures`).
+  and under 'models' each model's episodes (`metrics.episode_figures`)
+  and the control steps its copies were stepped (`copy_steps`).
 
   `log(line)` hears the progress (one line per model and seed).
   """
@@ -493,7 +506,7 @@ def evaluate(args: EvalArgs, log=None) -> dict:
   for index, (spec, config, models, state) in enumerate(loaded):
     description = (f'{spec.task} with {spec.n_agents} agents, agent '
                    f'{config.agent}')
-    played = []
+    played, stepped = [], 0
     for seed in args.seeds:
       # The first model's first episode is filmed and traced (`play`).
       first = not (index or played)
@@ -501,6 +514,7 @@ def evaluate(args: EvalArgs, log=None) -> dict:
       played += play(spec, config, models, seed, args.episodes, args.envs,
                      not args.stochastic, video, (args.width, args.height),
                      args.trace if first else '', args.reset_memory)
+      stepped += copy_steps(played[-args.episodes:])
       if first and (args.video or args.trace):
         recorded = bool(played[0]['success'])
       if video and args.strip:
@@ -523,8 +537,10 @@ def evaluate(args: EvalArgs, log=None) -> dict:
                       'stochastic': args.stochastic,
                       'time_limit': args.time_limit,
                       'n_pushers': args.n_pushers,
+                      'controller': args.controller,
                       'reset_memory': list(args.reset_memory),
                       'policy_from': state['policy_from'],
+                      'copy_steps': stepped,
                       'episodes': [metrics_lib.episode_figures(e)
                                    for e in played]})
   success, success_se = mean_and_error([e['success'] for e in episodes])

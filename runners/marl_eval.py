@@ -25,6 +25,7 @@ checkpoint, declared before evaluation (marl-eval's absolute metric, the
 best checkpoint evaluated on 10x the episodes, is not what we report).
 """
 import json
+import os
 from typing import Any, Iterable
 
 ENV_NAME = 'coop_suite'
@@ -39,22 +40,28 @@ def task_name(task: str, n_agents: int, stage: str = '') -> str:
 
 def algorithm_name(model: dict[str, Any]) -> str:
   """The model's variant (`agent`), then a `+<tag>` for each way its
-  evaluation left the protocol's (the final checkpoint's mean commands on
-  its training task), in this order: `stochastic` (sampled commands),
-  `reset_memory=<species,...>`, `policy_from=<species,...>`, the task's
-  `time_limit=<s>` and `n_pushers=<N>` when given, and each task option
-  `<key>=<JSON value>`. A probe's runs thus stay apart from the protocol's
-  in marl-eval's tables, while `coop-compare` still pairs them by task
-  and run."""
+  evaluation left the protocol's (the final checkpoint's mean commands,
+  with its own lower layer, on its training task), in this order:
+  `stochastic` (sampled commands), `reset_memory=<species,...>`,
+  `policy_from=<species,...>`, `controller=<folder name>` (another lower
+  layer), the task's `time_limit=<s>` and `n_pushers=<N>` when given, and
+  the task options by name, `<key>=<value>` (text as is, other values as
+  JSON). A probe's runs thus stay apart from the protocol's in marl-eval's
+  tables, while `coop-compare` still pairs them by task and run."""
   tags = ['stochastic'] if model.get('stochastic') else []
   for key in ('reset_memory', 'policy_from'):
     if model.get(key):
       tags.append(f'{key}={",".join(model[key])}')
+  if model.get('controller'):
+    tags.append('controller='
+                + os.path.basename(os.path.normpath(model['controller'])))
   for key in ('time_limit', 'n_pushers'):
     if model.get(key):
       tags.append(f'{key}={model[key]:g}')
-  tags += [f'{key}={json.dumps(value, separators=(",", ":"))}'
-           for key, value in (model.get('options') or {}).items()]
+  options = model.get('options') or {}
+  tags += [f'{key}={value}' if isinstance(value, str) else
+           f'{key}={json.dumps(value, separators=(",", ":"))}'
+           for key, value in sorted(options.items())]
   return '+'.join([model['agent'], *tags])
 
 

@@ -315,29 +315,16 @@ def selected(args: PaperArgs, plan=None) -> list[paper_plan.Cell]:
 
 
 PACE_WINDOW = 600.0
-"""Seconds of a running cell's latest updates that `measured_pace` takes its
-rate over (metrics.csv's `wall_time`); a metrics.csv not written for this
-long is not taken as running."""
+"""Seconds of a cell's latest updates that its pace is taken over
+(metrics.csv's `wall_time`, `window_pace`); a metrics.csv not written for
+this long is not taken as running (`measured_pace`)."""
 
 
-def measured_pace(cell: paper_plan.Cell, args: PaperArgs,
-                  since_steps: int = -1) -> Optional[float]:
-  """The env steps/s of the running `cell` over its last `PACE_WINDOW`
-  seconds of updates (its run directory's metrics.csv: env steps over the
-  updates' wall time, which leaves out the ~1-2% between updates), or None
-  without a fresh metrics.csv holding 3 rows in that window. With
-  `since_steps` (where this process resumed it), only the rows past it:
-  a resumed run's earlier rows ran elsewhere, maybe at another pace."""
-  logdir = run_directory(cell, args)
-  try:
-    if time.time() - os.path.getmtime(os.path.join(logdir, run_dir.METRICS)
-                                      ) > PACE_WINDOW:
-      return None
-    rows = run_dir.read_metrics(logdir)
-  except (OSError, ValueError, csv.Error):
-    return None
-  rows = [r for r in rows if 'env_steps' in r and 'wall_time' in r
-          and r['env_steps'] > since_steps]
+def window_pace(rows: list[dict]) -> Optional[float]:
+  """The env steps/s of metrics.csv `rows` over their last `PACE_WINDOW`
+  seconds of updates (env steps over the updates' wall time, which leaves
+  out the ~1-2% between updates), or None without 3 rows in that window."""
+  rows = [r for r in rows if 'env_steps' in r and 'wall_time' in r]
   window = [r for r in rows
             if rows[-1]['wall_time'] - r['wall_time'] <= PACE_WINDOW]
   if len(window) < 3 or window[-1]['wall_time'] <= window[0]['wall_time']:
@@ -347,32 +334,65 @@ def measured_pace(cell: paper_plan.Cell, args: PaperArgs,
   return rate if rate > 0 and math.isfinite(rate) else None
 
 
-def done_pace(args: PaperArgs, plan=None) -> dict[str, list[float]]:
-  """{variant: the Ant steps/s of each of its done cells' training}: env
-  steps times the cell's Ants over the wall time of its updates (its
-  committed metrics.csv's last row; resumed runs count on), whatever the
-  machine and whatever ran beside it."""
-  paces = {}
+def measured_pace(cell: paper_plan.Cell, args: PaperArgs,
+                  since_steps: int = -1) -> Optional[float]:
+  """The `window_pace` of the running `cell` (its run directory's
+  metrics.csv, None unless written in the last `PACE_WINDOW` seconds).
+  With `since_steps` (where this process resumed it), only the rows past
+  it: a resumed run's earlier rows ran elsewhere, maybe at another pace;
+  another process (`dry_run`) cannot know that point and takes them all."""
+  logdir = run_directory(cell, args)
+  try:
+    if time.time() - os.path.getmtime(os.path.join(logdir, run_dir.METRICS)
+                                      ) > PACE_WINDOW:
+      return None
+    rows = run_dir.read_metrics(logdir)
+  except (OSError, ValueError, csv.Error):
+    return None
+  return window_pace([r for r in rows if r.get('env_steps', -1) > since_steps])
+
+
+def done_runs(args: PaperArgs, plan=None
+              ) -> list[tuple[paper_plan.Cell, list[dict]]]:
+  """Each done cell of `plan` (the plan's) with its committed metrics.csv
+  rows; a cell whose file does not read is left out."""
+  runs = []
   for cell in paper_plan.PLAN if plan is None else plan:
     if not is_done(cell, args):
       continue
     try:
-      last = run_dir.read_metrics(results_directory(cell, args))[-1]
-    except (OSError, ValueError, IndexError, csv.Error):
+      rows = run_dir.read_metrics(results_directory(cell, args))
+    except (OSError, ValueError, csv.Error):
       continue
+    if rows:
+      runs.append((cell, rows))
+  return runs
+
+
+def done_pace(runs) -> dict[str, list[float]]:
+  """{variant: the Ant steps/s of each of its `done_runs`' training}: env
+  steps times the cell's Ants over the wall time of its updates (its
+  metrics.csv's last row; resumed runs count on), whatever the machine
+  and whatever ran beside it."""
+  paces = {}
+  for cell, rows in runs:
+    last = rows[-1]
     if last.get('wall_time', 0) > 0 and last.get('env_steps', 0) > 0:
       paces.setdefault(cell.agent, []).append(
           last['env_steps'] * cell.ants / last['wall_time'])
   return paces
 
 
-def done_eval_pace(args: PaperArgs, plan=None) -> list[float]:
-  """The Ant steps/s of the done cells' evaluations that measured their
-  wall time (their eval JSON's `eval_seconds`), in full-length episodes
-  (`paper_plan.eval_ant_steps`, the estimates' measure)."""
-  paces = []
-  for cell in paper_plan.PLAN if plan is None else plan:
-    if not is_done(cell, args):
+def eval_shares(runs, args: PaperArgs) -> list[float]:
+  """For each evaluation of the `done_runs` that measured itself (its
+  eval JSON's `eval_seconds` and `eval_ant_steps`, written since 29
+  November): its Ant steps/s over the cell's training's in its last
+  `PACE_WINDOW` seconds of updates (`window_pace`), which ran on the same
+  machine just before it, so the share holds from machine to machine."""
+  shares = []
+  for cell, rows in runs:
+    training = window_pace(rows)
+    if not training:
       continue
     for n in cell.populations:
       path = os.path.join(results_directory(cell, args), EVAL_FILE.format(n))
@@ -381,11 +401,17 @@ def done_eval_pace(args: PaperArgs, plan=None) -> list[float]:
           figures = json.load(f)
       except (OSError, ValueError):
         continue
-      seconds = figures.get('eval_seconds', 0)
-      if seconds > 0:
-        paces.append(paper_plan.eval_ant_steps(
-            cell, n, figures.get('episodes', args.episodes)) / seconds)
-  return paces
+      seconds = figures.get('eval_seconds') or 0
+      steps = figures.get('eval_ant_steps') or 0
+      if seconds > 0 and steps > 0:
+        shares.append(steps / seconds / (training * cell.ants))
+  return shares
+
+
+def eval_share(shares: list[float]) -> Optional[float]:
+  """The median of `eval_shares`, or None without one: the estimates then
+  evaluate at the training's rate."""
+  return statistics.median(shares) if shares else None
 
 
 def estimate_rates(paces: dict[str, list[float]], agents
@@ -404,28 +430,21 @@ def estimate_rates(paces: dict[str, list[float]], agents
           for agent in dict.fromkeys(('hrl', *rates, *agents))}
 
 
-def eval_rate(args: PaperArgs, plan=None) -> Optional[float]:
-  """The median of `done_eval_pace`, or None without one (the estimates
-  then take the training's rate)."""
-  paces = done_eval_pace(args, plan)
-  return statistics.median(paces) if paces else None
-
-
 def finishes_within(cell: paper_plan.Cell, args: PaperArgs, env_steps: int,
                     seconds: float, since_steps: int = -1) -> bool:
   """Whether `cell`, stopped at `env_steps`, would end its training and
   the evaluations of its final checkpoint within `seconds`: the training
   at the pace its run directory measures past `since_steps`
-  (`measured_pace`), the evaluations at the done cells' (`eval_rate`,
-  else at that pace too; `paper_plan.estimated_seconds`). False without a
-  measured pace."""
+  (`measured_pace`), the evaluations at the done cells' share of it
+  (`eval_share`, else at that pace too; `paper_plan.estimated_seconds`,
+  episodes at their full length). False without a measured pace."""
   pace = measured_pace(cell, args, since_steps)
   if pace is None:
     return False
   left = max(budget(cell, args) - env_steps, 0)
+  share = eval_share(eval_shares(done_runs(args), args))
   return paper_plan.estimated_seconds(cell, left, args.episodes,
-                                      pace * cell.ants,
-                                      eval_rate(args)) <= seconds
+                                      pace * cell.ants, share) <= seconds
 
 
 def dry_run(args: PaperArgs, plan=None) -> str:
@@ -440,9 +459,11 @@ def dry_run(args: PaperArgs, plan=None) -> str:
                   f'{"to go":>9s}  command'], 0.0
   pace = []  # Each running cell's measured rate / its estimated rate.
   cells = selected(args, plan)
-  paces = done_pace(args, plan)
+  runs = done_runs(args, plan)
+  paces = done_pace(runs)
   rates = estimate_rates(paces, [cell.agent for cell in cells])
-  evaluating = eval_rate(args, plan)
+  shares = eval_shares(runs, args)
+  evaluating = eval_share(shares)
   for cell in cells:
     state = status(cell, args)
     steps = budget(cell, args)
@@ -486,9 +507,12 @@ def dry_run(args: PaperArgs, plan=None) -> str:
                              paper_plan.VARIANT_SPEED.items())
                  + ' (runners.paper_plan)')
   if evaluating:
-    lines.append(f'  evaluations at {evaluating:,.0f} Ant steps/s of '
-                 'full-length episodes (median of the done ones that '
-                 'measured their wall time)')
+    lines.append(f'  evaluations (every episode at its full length) at '
+                 f'{evaluating:.2f}x the training\'s Ant steps/s: the '
+                 f'median of {len(shares)} done ones that measured '
+                 'themselves, each '
+                 f'against its cell\'s last {PACE_WINDOW / 60:g} min of '
+                 'training')
   if pace:
     running = f'the {len(pace)} cells' if len(pace) > 1 else 'the cell'
     together = ' together' if len(pace) > 1 else ''
@@ -523,6 +547,7 @@ def evaluate_cell(cell: paper_plan.Cell, checkpoint: str, args: PaperArgs,
         'budget': budget(cell, args), 'episodes': result['episodes'],
         'eval_seed': args.eval_seed,
         'eval_seconds': round(time.monotonic() - started, 1),
+        'eval_ant_steps': model['copy_steps'] * cell.ants_at(n),
         **{k: result[k] for k in ('success', 'success_se', 'return',
                                   'return_se')},
         'train_command': command(cell, args),
@@ -764,20 +789,21 @@ def _run_in_turn(args: PaperArgs, cells: list[paper_plan.Cell],
         continue
       try:
         with claim(cell, args):
-          stopped = run_cell(cell, args, log, deadline)
-          # Out of time, or stopped by a signal past --hours (in
-          # --finish-within's minutes, keeping its exit status): stashed.
+          try:
+            stopped = run_cell(cell, args, log, deadline)
+          except KeyboardInterrupt:  # A signal outside training.
+            if deadline and run_dir.clock() >= deadline:
+              _stash_at_deadline(cell, args, log, 'interrupted')
+            raise
+          # Out of time, or stopped by a signal once --hours are up (in
+          # --finish-within's minutes, or in the update that ran past
+          # them; it keeps its exit status): stashed.
           if stopped == run_dir.DEADLINE or (
               stopped and deadline and run_dir.clock() >= deadline):
-            folder = stash(cell, args)
-            if not folder:  # Stopped before its first update: afresh.
-              shutil.rmtree(run_directory(cell, args), ignore_errors=True)
-            why = (f'out of time (--hours {args.hours:g})'
-                   if stopped == run_dir.DEADLINE
-                   else f'stopped by {stopped} past --hours')
-            log(f'{cell.path}: {why}; '
-                + (f'stashed in {folder}: commit it' if folder
-                   else 'no update yet, nothing to stash'))
+            _stash_at_deadline(cell, args, log, (
+                f'out of time (--hours {args.hours:g})'
+                if stopped == run_dir.DEADLINE
+                else f'stopped by {stopped} with --hours up'))
       except CellTaken as taken:
         log(f'{taken}; passed over')
         elsewhere[results_directory(cell, args)] = cell
@@ -789,6 +815,17 @@ def _run_in_turn(args: PaperArgs, cells: list[paper_plan.Cell],
     if owns_ray:
       import ray  # pylint: disable=g-import-not-at-top
       ray.shutdown()
+
+
+def _stash_at_deadline(cell: paper_plan.Cell, args: PaperArgs,
+                       log: Callable[[str], None], why: str):
+  """Stashes the cell that `why` stopped once `--hours` were up (a cell
+  stopped before its first update starts afresh next time)."""
+  folder = stash(cell, args)
+  if not folder:
+    shutil.rmtree(run_directory(cell, args), ignore_errors=True)
+  log(f'{cell.path}: {why}; ' + (f'stashed in {folder}: commit it' if folder
+                                 else 'no update yet, nothing to stash'))
 
 
 class CellFailed(Exception):

@@ -186,6 +186,11 @@ class Cell:
     pushers = 2 if self.task == 'ravine' and self.stage != 'crossers' else 0
     return self.n_agents + pushers
 
+  def ants_at(self, n_agents: int) -> int:
+    """Ants per copy evaluated with `n_agents` (its population, or a
+    zero-shot one; the ravine's pushers stay)."""
+    return self.ants - self.n_agents + n_agents
+
   def matches(self, patterns) -> bool:
     """Whether `--only` patterns select it: a pattern matches the cell's
     path, a prefix of it (`transport/hrl`) or its name; `*` is a wildcard."""
@@ -271,24 +276,17 @@ PLAN = paper_plan()
 
 def estimated_seconds(cell: Cell, steps: int, episodes: int = EPISODES,
                       ant_rate: Optional[float] = None,
-                      eval_rate: Optional[float] = None) -> float:
+                      eval_share: Optional[float] = None) -> float:
   """Estimated wall time (s) of `steps` training steps of `cell` at
-  `estimated_rate` plus the evaluations of its final checkpoint at
-  `eval_rate` (Ant steps/s of full-length episodes, `eval_ant_steps`; e.g.
-  the done cells' measured evaluations), else at the training's rate."""
+  `estimated_rate` plus the evaluations of its final checkpoint, every
+  episode at its full length (one that succeeds ends sooner), at
+  `eval_share` times that rate (e.g. the done cells' measured share), else
+  at that rate."""
   rate = estimated_rate(cell, ant_rate) * cell.ants
-  evaluations = sum(eval_ant_steps(cell, n, episodes)
+  steps_per_episode = EPISODE_SECONDS / CONTROL_TIMESTEP
+  evaluations = sum(episodes * steps_per_episode * cell.ants_at(n)
                     for n in cell.populations)
-  return steps * cell.ants / rate + evaluations / (eval_rate or rate)
-
-
-def eval_ant_steps(cell: Cell, n_agents: int,
-                   episodes: int = EPISODES) -> float:
-  """Ant steps of `episodes` full-length episodes of `cell`'s final
-  checkpoint with `n_agents` (the estimates' measure of an evaluation;
-  an episode that succeeds ends sooner)."""
-  return (episodes * EPISODE_SECONDS / CONTROL_TIMESTEP
-          * (cell.ants - cell.n_agents + n_agents))
+  return steps * cell.ants / rate + evaluations / (rate * (eval_share or 1.0))
 
 
 def estimated_rate(cell: Cell, ant_rate: Optional[float] = None) -> float:

@@ -253,19 +253,23 @@ def test_out_of_hours_the_running_cell_stops_is_stashed_and_none_starts(
   assert paper.status(second, args).state == 'todo'
 
 
+PAST_HOURS = 2.5 * 3600 + 1
+"""1 s past `--hours 2.5` (--finish-within's minutes count from --hours)."""
+
+
 def _hours_pass_after(monkeypatch, update, signal_after=None):
-  """Training's deadline clock reads 0 until `update` ends, then 1 s past
-  `--hours 2.5` (--finish-within's minutes count from --hours); SIGINT
-  as update `signal_after` ends. Returns the clock ({'now': seconds})."""
-  clock = {'now': 0.0}
+  """The deadlines' clock reads 0 until `update` ends, then `PAST_HOURS`;
+  SIGINT as update `signal_after` ends. Returns the clock: {'now': its
+  reading, 'after': update, 'signal_after': signal_after}, to change."""
+  clock = {'now': 0.0, 'after': update, 'signal_after': signal_after}
   monkeypatch.setattr(run_dir, 'clock', lambda: clock['now'])
   real_train = learner_loop.train
 
   def train(args, deadline=None):
     def on_update(done, *_):
-      if done == update:
-        clock['now'] = 2.5 * 3600 + 1
-      if done == signal_after:
+      if done == clock['after']:
+        clock['now'] = PAST_HOURS
+      if done == clock['signal_after']:
         os.kill(os.getpid(), signal.SIGINT)
     return real_train(args, on_update=on_update, deadline=deadline)
   monkeypatch.setattr(learner_loop, 'train', train)
@@ -319,18 +323,34 @@ def test_a_signal_past_hours_stashes_the_cell_with_its_exit_status(
   monkeypatch.setattr(paper_plan, 'PLAN', [first])
   # Past --hours after update 3; trains on in --finish-within's minutes
   # until SIGINT in update 4.
-  _hours_pass_after(monkeypatch, 3, signal_after=4)
+  clock = _hours_pass_after(monkeypatch, 3, signal_after=4)
   args = _args(tmp_path)
+  argv = _argv(args) + ['--hours', '2.5', '--finish-within', '30']
   with pytest.raises(SystemExit) as exit_info:
-    paper.main(_argv(args) + ['--hours', '2.5', '--finish-within', '30'])
+    paper.main(argv)
   out = capsys.readouterr().out
   assert exit_info.value.code == 128 + signal.SIGINT
   assert 'trains on' in out
   stashed = paper.partial_directory(first, args)
-  assert (f'{first.path}: stopped by SIGINT past --hours; stashed in '
+  assert (f'{first.path}: stopped by SIGINT with --hours up; stashed in '
           f'{stashed}: commit it') in out
   assert os.listdir(os.path.join(stashed, 'checkpoints')) == ['4']
   assert paper.status(first, args) == paper.Status('partial', 4 * STEPS)
+  # Next time it trains to its budget in time, and a signal interrupts its
+  # evaluation once --hours are up: the trained cell is stashed too.
+  clock.update(now=0.0, after=None, signal_after=None)
+
+  def interrupted(*_):
+    clock['now'] = PAST_HOURS
+    raise KeyboardInterrupt
+  monkeypatch.setattr(paper, 'evaluate_cell', interrupted)
+  with pytest.raises(KeyboardInterrupt):
+    paper.main(argv)
+  assert (f'{first.path}: interrupted; stashed in {stashed}: commit it'
+          in capsys.readouterr().out)
+  assert os.listdir(os.path.join(stashed, 'checkpoints')) == ['6']
+  shutil.rmtree(args.runs)
+  assert paper.status(first, args) == paper.Status('trained', 6 * STEPS)
 
 
 def test_a_deadline_stops_once_and_leaves_the_first_signal_graceful():
@@ -494,6 +514,12 @@ def test_the_plan_skips_done_cells_and_resumes_a_partial_one(
       figures = json.load(f)
     assert (figures['n_agents'], figures['update'], figures['env_steps'],
             figures['episodes']) == (n, 2, 2 * STEPS, 2)
+    # Its cost: 2 copies of n Ants, stepped until the longer of their
+    # episodes (TINY's time limit at the most) ended.
+    longest = round(TINY['time_limit'] / paper_plan.CONTROL_TIMESTEP)
+    assert figures['eval_seconds'] > 0
+    assert figures['eval_ant_steps'] % (2 * n) == 0
+    assert 0 < figures['eval_ant_steps'] <= 2 * n * longest
     marl_eval.check(figures['marl_eval'])
     assert list(figures['marl_eval']['coop_suite']) == [f'transport_n{n}']
   # The committed copy is the final checkpoint's policy: it evaluates on
@@ -583,7 +609,7 @@ def test_dry_run_estimates_at_the_pace_of_the_done_cells(tmp_path):
       f.write(f'update,env_steps,wall_time\n1,4000,{wall / 2}\n'
               f'2,8000,{wall}\n')
   _commit(cells[4], args, {n: [1] for n in cells[4].populations})
-  paces = paper.done_pace(args, cells)
+  paces = paper.done_pace(paper.done_runs(args, cells))
   assert paces == {'hrl': [320.0, 160.0, 80.0], 'flat': [40.0]}
   rates = paper.estimate_rates(paces, ['mappo'])
   assert rates == {'hrl': 160.0, 'flat': 40.0, 'mappo': 160.0}
@@ -662,10 +688,11 @@ def test_finishes_within_judges_this_runs_pace_and_the_done_evaluations(
             '3,1400000,1100\n4,1800000,1200\n5,2200000,1300\n')
   budget = paper.budget(crossers, args)
   left = budget - 2_200_000
-  # No done evaluation measured: they go at the training's pace too.
-  evaluations = paper_plan.estimated_seconds(crossers, 0, 100,
-                                             4_000 * crossers.ants)
-  exact = left / 4_000 + evaluations
+  # No done evaluation measured: its 100 episodes (2 Ants, each at its
+  # full length) go at the training's pace too.
+  full_length = 100 * paper_plan.EPISODE_SECONDS / paper_plan.CONTROL_TIMESTEP
+  assert crossers.populations == (2,) and crossers.ants == 2
+  exact = left / 4_000 + full_length / 4_000
   assert paper.finishes_within(crossers, args, 2_200_000, exact + 1e-6,
                                since_steps=1_000_000)
   assert not paper.finishes_within(crossers, args, 2_200_000, exact - 1,
@@ -675,32 +702,33 @@ def test_finishes_within_judges_this_runs_pace_and_the_done_evaluations(
   # Fewer than 3 rows past the resume: no pace, no fit.
   assert not paper.finishes_within(crossers, args, 2_200_000, 1e9,
                                    since_steps=1_400_000)
-  # A done cell whose evaluations took 600 s and 300 s (one without a
-  # wall time counts for nothing): its median pace for the evaluations.
+  # A done cell trained at 1,000 env steps/s (4,000 Ant steps/s) over its
+  # last 10 min, whose evaluations measured 0.5, 0.25 and 0.3 of that (one
+  # without a wall time counts for nothing): their median share of the
+  # training's pace for the evaluations, each episode at its full length.
   _commit(corridor, args, {n: [1] for n in corridor.populations})
-  for n, seconds in zip(corridor.populations, (600, 300, None, 300)):
-    path = os.path.join(paper.results_directory(corridor, args),
-                        paper.EVAL_FILE.format(n))
+  folder = paper.results_directory(corridor, args)
+  with open(os.path.join(folder, 'metrics.csv'), 'w') as f:
+    f.write('update,env_steps,wall_time\n1,1000,1\n2,2000,2\n3,3000,3\n')
+  for n, measured in zip(corridor.populations, (
+      (100, 200_000), (100, 100_000), (None, 100_000), (100, 120_000))):
+    path = os.path.join(folder, paper.EVAL_FILE.format(n))
     with open(path) as f:
       figures = json.load(f)
-    figures.update(episodes=100, **({'eval_seconds': seconds} if seconds
-                                     else {}))
+    figures.update(eval_seconds=measured[0], eval_ant_steps=measured[1])
     evaluate.write_json(path, figures)
-  paces = sorted(paper.done_eval_pace(args, [corridor]))
-  assert paces == sorted(
-      paper_plan.eval_ant_steps(corridor, n, 100) / seconds
-      for n, seconds in ((4, 600), (2, 300), (5, 300)))
-  slower = left / 4_000 + sum(
-      paper_plan.eval_ant_steps(crossers, n, 100)
-      for n in crossers.populations) / paces[1]
-  assert paper.eval_rate(args) == paces[1]
+  shares = paper.eval_shares(paper.done_runs(args, [corridor]), args)
+  assert sorted(shares) == [0.25, 0.3, 0.5]
+  assert paper.eval_share(shares) == 0.3
+  slower = left / 4_000 + full_length / (4_000 * 0.3)
   assert paper.finishes_within(crossers, args, 2_200_000, slower + 1e-6,
                                since_steps=1_000_000)
   assert not paper.finishes_within(crossers, args, 2_200_000, slower - 1,
                                    since_steps=1_000_000)
   assert paper.dry_run(args, [crossers, corridor]).splitlines()[-1] == (
-      f'  evaluations at {paces[1]:,.0f} Ant steps/s of full-length '
-      'episodes (median of the done ones that measured their wall time)')
+      '  evaluations (every episode at its full length) at 0.30x the '
+      "training's Ant steps/s: the median of 3 done ones that measured "
+      "themselves, each against its cell's last 10 min of training")
 
 
 class _FakeCellProcess:
