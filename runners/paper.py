@@ -820,7 +820,11 @@ def _run_in_turn(args: PaperArgs, cells: list[paper_plan.Cell],
 def _stash_at_deadline(cell: paper_plan.Cell, args: PaperArgs,
                        log: Callable[[str], None], why: str):
   """Stashes the cell that `why` stopped once `--hours` were up (a cell
-  stopped before its first update starts afresh next time)."""
+  stopped before its first update starts afresh next time; a published
+  one keeps its run directory)."""
+  if is_done(cell, args):
+    log(f'{cell.path}: {why}; published already, nothing to stash')
+    return
   folder = stash(cell, args)
   if not folder:
     shutil.rmtree(run_directory(cell, args), ignore_errors=True)
