@@ -510,9 +510,8 @@ def dry_run(args: PaperArgs, plan=None) -> str:
     lines.append(f'  evaluations (every episode at its full length) at '
                  f'{evaluating:.2f}x the training\'s Ant steps/s: the '
                  f'median of {len(shares)} done ones that measured '
-                 'themselves, each '
-                 f'against its cell\'s last {PACE_WINDOW / 60:g} min of '
-                 'training')
+                 f'themselves, each against its cell\'s last '
+                 f'{PACE_WINDOW / 60:g} min of training')
   if pace:
     running = f'the {len(pace)} cells' if len(pace) > 1 else 'the cell'
     together = ' together' if len(pace) > 1 else ''
@@ -822,14 +821,14 @@ def _stash_at_deadline(cell: paper_plan.Cell, args: PaperArgs,
   """Stashes the cell that `why` stopped once `--hours` were up (a cell
   stopped before its first update starts afresh next time; a published
   one keeps its run directory)."""
-  if is_done(cell, args):
+  folder = stash(cell, args)  # None when published or without an update.
+  if folder:
+    log(f'{cell.path}: {why}; stashed in {folder}: commit it')
+  elif is_done(cell, args):
     log(f'{cell.path}: {why}; published already, nothing to stash')
-    return
-  folder = stash(cell, args)
-  if not folder:
+  else:
     shutil.rmtree(run_directory(cell, args), ignore_errors=True)
-  log(f'{cell.path}: {why}; ' + (f'stashed in {folder}: commit it' if folder
-                                 else 'no update yet, nothing to stash'))
+    log(f'{cell.path}: {why}; no update yet, nothing to stash')
 
 
 class CellFailed(Exception):
