@@ -383,28 +383,39 @@ def done_pace(runs) -> dict[str, list[float]]:
   return paces
 
 
+def measured_evaluations(cell: paper_plan.Cell, args: PaperArgs
+                         ) -> list[tuple[float, float]]:
+  """(`eval_seconds`, `eval_ant_steps`) of each of the published `cell`'s
+  eval JSONs that measured itself (written since 29 November); empty for
+  a cell not published."""
+  measured = []
+  for n in cell.populations:
+    path = os.path.join(results_directory(cell, args), EVAL_FILE.format(n))
+    try:
+      with open(path) as f:
+        figures = json.load(f)
+    except (OSError, ValueError):
+      continue
+    seconds = figures.get('eval_seconds') or 0
+    steps = figures.get('eval_ant_steps') or 0
+    if seconds > 0 and steps > 0:
+      measured.append((seconds, steps))
+  return measured
+
+
 def eval_shares(runs, args: PaperArgs) -> list[float]:
-  """For each evaluation of the `done_runs` that measured itself (its
-  eval JSON's `eval_seconds` and `eval_ant_steps`, written since 29
-  November): its Ant steps/s over the cell's training's in its last
-  `PACE_WINDOW` seconds of updates (`window_pace`), which ran on the same
-  machine just before it, so the share holds from machine to machine."""
+  """For each evaluation of the `done_runs` that measured itself
+  (`measured_evaluations`): its Ant steps/s over the cell's training's in
+  its last `PACE_WINDOW` seconds of updates (`window_pace`), which ran on
+  the same machine just before it, so the share holds from machine to
+  machine."""
   shares = []
   for cell, rows in runs:
-    training = window_pace(rows)
-    if not training:
-      continue
-    for n in cell.populations:
-      path = os.path.join(results_directory(cell, args), EVAL_FILE.format(n))
-      try:
-        with open(path) as f:
-          figures = json.load(f)
-      except (OSError, ValueError):
-        continue
-      seconds = figures.get('eval_seconds') or 0
-      steps = figures.get('eval_ant_steps') or 0
-      if seconds > 0 and steps > 0:
-        shares.append(steps / seconds / (training * cell.ants))
+    evaluations = measured_evaluations(cell, args)
+    training = window_pace(rows) if evaluations else None
+    if training:
+      shares.extend(steps / seconds / (training * cell.ants)
+                    for seconds, steps in evaluations)
   return shares
 
 
@@ -442,7 +453,10 @@ def finishes_within(cell: paper_plan.Cell, args: PaperArgs, env_steps: int,
   if pace is None:
     return False
   left = max(budget(cell, args) - env_steps, 0)
-  share = eval_share(eval_shares(done_runs(args), args))
+  # Only the cells whose evaluations measured themselves have their
+  # metrics read (done_runs reads every row, gzipped files whole).
+  measured = [c for c in paper_plan.PLAN if measured_evaluations(c, args)]
+  share = eval_share(eval_shares(done_runs(args, measured), args))
   return paper_plan.estimated_seconds(cell, left, args.episodes,
                                       pace * cell.ants, share) <= seconds
 

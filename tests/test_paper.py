@@ -671,7 +671,7 @@ def test_dry_run_measures_the_pace_of_the_cells_running_now(tmp_path):
 
 
 def test_finishes_within_judges_this_runs_pace_and_the_done_evaluations(
-    tmp_path):
+    tmp_path, monkeypatch):
   """The rest of the training at the pace of the updates past where this
   process resumed it, the evaluations at the done cells' measured pace;
   the fit is exact to the second (a minutes/seconds slip fails it)."""
@@ -725,6 +725,18 @@ def test_finishes_within_judges_this_runs_pace_and_the_done_evaluations(
                                since_steps=1_000_000)
   assert not paper.finishes_within(crossers, args, 2_200_000, slower - 1,
                                    since_steps=1_000_000)
+  # A done cell whose evaluations did not measure themselves: its metrics
+  # are not read (only the running cell's and the measured one's are).
+  other, = _plan_cells('corridor/hrl/n4/s1')
+  _commit(other, args, {n: [1] for n in other.populations})
+  read = []
+  read_metrics = run_dir.read_metrics
+  monkeypatch.setattr(run_dir, 'read_metrics',
+                      lambda folder: read.append(folder) or read_metrics(
+                          folder))
+  assert paper.finishes_within(crossers, args, 2_200_000, slower + 1e-6,
+                               since_steps=1_000_000)
+  assert read == [logdir, folder]
   assert paper.dry_run(args, [crossers, corridor]).splitlines()[-1] == (
       '  evaluations (every episode at its full length) at 0.30x the '
       "training's Ant steps/s: the median of 3 done ones that measured "
