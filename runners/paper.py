@@ -521,10 +521,12 @@ def dry_run(args: PaperArgs, plan=None) -> str:
                              paper_plan.VARIANT_SPEED.items())
                  + ' (runners.paper_plan)')
   if evaluating:
+    measured = (f'the median of {len(shares)} done ones that measured '
+                'themselves, each' if len(shares) > 1 else
+                'the one done evaluation that measured itself,')
     lines.append(f'  evaluations (every episode at its full length) at '
-                 f'{evaluating:.2f}x the training\'s Ant steps/s: the '
-                 f'median of {len(shares)} done ones that measured '
-                 f'themselves, each against its cell\'s last '
+                 f'{evaluating:.2f}x the training\'s Ant steps/s: '
+                 f'{measured} against its cell\'s last '
                  f'{PACE_WINDOW / 60:g} min of training')
   if pace:
     running = f'the {len(pace)} cells' if len(pace) > 1 else 'the cell'

@@ -741,6 +741,11 @@ def test_finishes_within_judges_this_runs_pace_and_the_done_evaluations(
       '  evaluations (every episode at its full length) at 0.30x the '
       "training's Ant steps/s: the median of 3 done ones that measured "
       "themselves, each against its cell's last 10 min of training")
+  monkeypatch.setattr(paper, 'eval_shares', lambda runs, args: [0.5])
+  assert paper.dry_run(args, [crossers, corridor]).splitlines()[-1] == (
+      '  evaluations (every episode at its full length) at 0.50x the '
+      "training's Ant steps/s: the one done evaluation that measured "
+      "itself, against its cell's last 10 min of training")
 
 
 class _FakeCellProcess:
