@@ -16,14 +16,19 @@ likely so lopsided a split of those discordant episodes is when each one is
 a fair coin's toss: p = min(1, 2 P(X <= min(b, c))), X ~ Binomial(b + c,
 1/2), b and c the episodes only the one or only the other wins. It is more
 sensitive than comparing two success rates with their standard errors,
-because the episodes' shared difficulty cancels.
+because the episodes' shared difficulty cancels. On a graded figure
+(`--metric crossed`, the corridor's Ants through an episode; `return`)
+the same test counts the episodes where each model scores higher and
+leaves the ties out: the exact sign test, of which McNemar's is the 0 / 1
+case.
 
 `--evaluations` takes `coop-eval --json` files, `coop-paper` eval JSONs
 (`results/paper/<cell>/eval_n<N>.json`) or a cell's folder (its trained
 population's file). A
 file with several models (`coop-eval` with several `--checkpoint`s) gives
 one model per run. The first model is the reference; every other one is
-compared with it, on a 0 / 1 episode figure (`--metric`, default `success`).
+compared with it, on an episode figure (`--metric`, default `success`):
+0 / 1 figures print the wins, graded ones the means.
 With `--paired-with`, each model is instead compared with the model of the
 same evaluated task and run (`seed_<s>`) in those files, e.g. five trained
 models against the same five played otherwise, and a last row pools the
@@ -58,8 +63,10 @@ class CompareArgs:
   """Evaluation JSONs (`coop-eval --json`, `coop-paper`'s eval_n<N>.json)
   or `coop-paper` cell folders; the first model is the reference."""
   metric: str = 'success'
-  """The 0 / 1 episode figure to compare (`success`, the ravine's
-  `stone_in_place`, ...)."""
+  """The episode figure to compare: 0 / 1 (`success`, the ravine's
+  `stone_in_place`, ...: exact McNemar) or graded (the corridor's
+  `crossed`, `return`, ...: the exact sign test on the episodes where one
+  model scores higher)."""
   paired_with: tuple[str, ...] = ()
   """Evaluations of the same runs played otherwise (`coop-eval
   --reset-memory`, `--stochastic`, another variant's seeds): each model of
@@ -70,7 +77,9 @@ class CompareArgs:
 
 def mcnemar_p(only_a: int, only_b: int) -> float:
   """Exact two-sided McNemar p-value of `only_a` episodes won by one model
-  alone against `only_b` won by the other alone (1.0 when there are none)."""
+  alone against `only_b` won by the other alone (1.0 when there are none);
+  with episodes where one model scores higher than the other, the exact
+  sign test."""
   if only_a < 0 or only_b < 0:
     raise ValueError(f'discordant counts must be >= 0, got {only_a}, '
                      f'{only_b}')
@@ -154,16 +163,24 @@ def load(paths) -> list[Model]:
   return models
 
 
-def _outcomes(model: Model, metric: str) -> list[bool]:
-  """`model`'s episodes won (True) and lost on the 0 / 1 figure `metric`."""
+def _figures(model: Model, metric: str) -> list[float]:
+  """`model`'s figure `metric`, one per episode (NaN is an error: the test
+  needs every episode's)."""
   if metric not in model.metrics:
     raise ValueError(f'{model.label}: no episode figure {metric!r} (it has '
                      f'{sorted(model.metrics)})')
   values = model.metrics[metric]
-  if any(v not in (0, 1) for v in values):
-    raise ValueError(f'{model.label}: {metric!r} is not 0 / 1 per episode; '
-                     'the McNemar test compares wins and losses')
-  return [v == 1 for v in values]
+  for episode, v in enumerate(values):
+    if v != v:  # pylint: disable=comparison-with-itself
+      raise ValueError(f'{model.label}: {metric!r} is NaN in episode '
+                       f'{episode}; the paired test needs every episode\'s')
+  return values
+
+
+def _binary(models: list[Model], metric: str) -> bool:
+  """Whether `metric` is 0 / 1 in every episode of every one of `models`
+  (wins and losses: McNemar), else graded (the sign test)."""
+  return all(v in (0, 1) for m in models for v in _figures(m, metric))
 
 
 def _check_paired(reference: Model, other: Model) -> None:
@@ -194,22 +211,55 @@ def _check_paired(reference: Model, other: Model) -> None:
              f'{a:.3f}')
 
 
-def _pair(reference: Model, other: Model, metric: str) -> dict:
-  """`other` against `reference` on `metric`: the episodes and the
-  reference's wins, its wins, the episodes both win, the discordant ones
-  and their exact McNemar p."""
-  ref, wins = _outcomes(reference, metric), _outcomes(other, metric)
-  if len(wins) != len(ref):
-    raise ValueError(f'{other.label}: {len(wins)} episodes, the reference '
-                     f'{len(ref)}: not the same episodes')
+BINARY_COUNTS = ('reference_wins', 'wins', 'both', 'reference_only',
+                 'model_only')
+"""A 0 / 1 figure's counts (summed when pairs are pooled); the discordant
+ones are `reference_only` and `model_only`."""
+GRADED_COUNTS = ('ties', 'reference_higher', 'model_higher')
+"""A graded figure's counts; the discordant ones are the two `_higher`."""
+
+
+def _pair(reference: Model, other: Model, metric: str, binary: bool) -> dict:
+  """`other` against `reference` on `metric`, episode by episode. 0 / 1
+  (`binary`): the reference's wins, its wins, the episodes both win, those
+  only one wins and their exact McNemar p. Graded: both means, the ties,
+  the episodes where each scores higher and their exact sign test p."""
+  ref, figures = _figures(reference, metric), _figures(other, metric)
+  if len(figures) != len(ref):
+    raise ValueError(f'{other.label}: {len(figures)} episodes, the '
+                     f'reference {len(ref)}: not the same episodes')
   _check_paired(reference, other)
-  only_ref = sum(a and not b for a, b in zip(ref, wins))
-  only_other = sum(b and not a for a, b in zip(ref, wins))
-  return {'episodes': len(ref), 'reference_wins': sum(ref),
-          'model': other.label, 'wins': sum(wins),
-          'both': sum(a and b for a, b in zip(ref, wins)),
-          'reference_only': only_ref, 'model_only': only_other,
-          'p': mcnemar_p(only_ref, only_other)}
+  pair = {'episodes': len(ref), 'model': other.label}
+  if binary:
+    only_ref = sum(a > b for a, b in zip(ref, figures))
+    only_other = sum(b > a for a, b in zip(ref, figures))
+    return {**pair, 'reference_wins': int(sum(ref)), 'wins': int(sum(figures)),
+            'both': sum(a == b == 1 for a, b in zip(ref, figures)),
+            'reference_only': only_ref, 'model_only': only_other,
+            'p': mcnemar_p(only_ref, only_other)}
+  higher_ref = sum(a > b for a, b in zip(ref, figures))
+  higher_other = sum(b > a for a, b in zip(ref, figures))
+  return {**pair, 'reference_mean': sum(ref) / len(ref),
+          'mean': sum(figures) / len(figures),
+          'ties': len(ref) - higher_ref - higher_other,
+          'reference_higher': higher_ref, 'model_higher': higher_other,
+          'p': mcnemar_p(higher_ref, higher_other)}
+
+
+def _pool(rows: list[dict], binary: bool) -> dict:
+  """`rows`' counts summed (graded: their means over all their episodes)
+  and the exact test of the summed discordant episodes."""
+  episodes = sum(r['episodes'] for r in rows)
+  pooled = {'episodes': episodes, **{
+      k: sum(r[k] for r in rows)
+      for k in (BINARY_COUNTS if binary else GRADED_COUNTS)}}
+  if binary:
+    pooled['p'] = mcnemar_p(pooled['reference_only'], pooled['model_only'])
+    return pooled
+  for k in ('reference_mean', 'mean'):
+    pooled[k] = sum(r[k] * r['episodes'] for r in rows) / episodes
+  pooled['p'] = mcnemar_p(pooled['reference_higher'], pooled['model_higher'])
+  return pooled
 
 
 def _by_run(models: list[Model], flag: str) -> dict[tuple[str, str], Model]:
@@ -226,9 +276,9 @@ def _by_run(models: list[Model], flag: str) -> dict[tuple[str, str], Model]:
 
 
 def compare(args: CompareArgs) -> dict:
-  """The reference model's wins and, for every other model, its wins and
-  the discordant episodes with their exact McNemar p (with
-  `--paired-with`: `compare_paired`)."""
+  """The reference model's wins (graded `--metric`: its mean) and, for
+  every other model, `_pair`'s row against it (with `--paired-with`:
+  `compare_paired`)."""
   if args.paired_with:
     return compare_paired(args)
   models = load(args.evaluations)
@@ -236,19 +286,23 @@ def compare(args: CompareArgs) -> dict:
     raise ValueError(f'--evaluations: {len(models)} model(s) '
                      f'{[m.label for m in models]}; name two or more')
   reference = models[0]
-  rows = [_pair(reference, other, args.metric) for other in models[1:]]
+  binary = _binary(models, args.metric)
+  rows = [_pair(reference, other, args.metric, binary)
+          for other in models[1:]]
+  summary = 'reference_wins' if binary else 'reference_mean'
   return {'reference': reference.label, 'metric': args.metric,
-          'episodes': rows[0]['episodes'],
-          'reference_wins': rows[0]['reference_wins'], 'models': rows}
+          'binary': binary, 'episodes': rows[0]['episodes'],
+          summary: rows[0][summary], 'models': rows}
 
 
 def compare_paired(args: CompareArgs) -> dict:
   """Each model of `--evaluations` against its run in `--paired-with`
   (rows as `compare`'s, with the row's own 'reference'), and under
   'pooled' the rows' counts summed with the
-  exact McNemar p of the summed discordant episodes."""
+  exact test of the summed discordant episodes (`_pool`)."""
   references = _by_run(load(args.evaluations), '--evaluations')
   others = _by_run(load(args.paired_with), '--paired-with')
+  binary = _binary([*references.values(), *others.values()], args.metric)
   rows = []
   for key, reference in references.items():
     other = others.pop(key, None)
@@ -256,15 +310,12 @@ def compare_paired(args: CompareArgs) -> dict:
       raise ValueError(f'--paired-with: no model of {reference.task} run '
                        f'{reference.run} to pair with {reference.label}')
     rows.append({'reference': reference.label,
-                 **_pair(reference, other, args.metric)})
+                 **_pair(reference, other, args.metric, binary)})
   if others:
     raise ValueError('--paired-with: no model of --evaluations for '
                      f'{sorted(m.label for m in others.values())}')
-  pooled = {k: sum(r[k] for r in rows) for k in (
-      'episodes', 'reference_wins', 'wins', 'both', 'reference_only',
-      'model_only')}
-  pooled['p'] = mcnemar_p(pooled['reference_only'], pooled['model_only'])
-  return {'metric': args.metric, 'pairs': rows, 'pooled': pooled}
+  return {'metric': args.metric, 'binary': binary, 'pairs': rows,
+          'pooled': _pool(rows, binary)}
 
 
 def _aligned(rows: list[tuple[str, ...]], left: int) -> list[str]:
@@ -278,12 +329,23 @@ def _aligned(rows: list[tuple[str, ...]], left: int) -> list[str]:
 
 def table(out: dict) -> str:
   """`compare`'s result as aligned text."""
-  metric = out['metric']
-  counts = ('both', 'reference only', 'model only', 'exact McNemar p')
+  metric, binary = out['metric'], out['binary']
+  if binary:
+    counts = ('both', 'reference only', 'model only', 'exact McNemar p')
+    keys = ('both', 'reference_only', 'model_only')
+  else:
+    counts = ('ties', 'reference higher', 'model higher',
+              'exact sign test p')
+    keys = GRADED_COUNTS
+    metric = f'{metric} mean'
 
   def tail(r):
-    return (str(r['both']), str(r['reference_only']), str(r['model_only']),
-            f'{r["p"]:.3g}')
+    return (*(str(r[k]) for k in keys), f'{r["p"]:.3g}')
+
+  def score(r, prefix=''):
+    if binary:
+      return f'{r[prefix + "wins"]} of {r["episodes"]}'
+    return f'{r[prefix + "mean"]:.4g}'
 
   if 'pairs' in out:
     pooled = out['pooled']
@@ -291,20 +353,18 @@ def table(out: dict) -> str:
                       f'against its run in --paired-with (model), {metric}']
                      + _aligned(
         [('reference', 'model', metric, metric, *counts)]
-        + [(r['reference'], r['model'],
-            f'{r["reference_wins"]} of {r["episodes"]}',
-            f'{r["wins"]} of {r["episodes"]}', *tail(r))
-           for r in out['pairs']]
+        + [(r['reference'], r['model'], score(r, 'reference_'), score(r),
+            *tail(r)) for r in out['pairs']]
         + [(f'pooled ({len(out["pairs"])} pairs)', '',
-            f'{pooled["reference_wins"]} of {pooled["episodes"]}',
-            f'{pooled["wins"]} of {pooled["episodes"]}', *tail(pooled))],
+            score(pooled, 'reference_'), score(pooled), *tail(pooled))],
         left=2))
   n = out['episodes']
+  reference = (f'{out["reference_wins"]} of {n} episodes' if binary else
+               f'{out["reference_mean"]:.4g} over {n} episodes')
   return '\n'.join(
-      [f'reference: {out["reference"]}: {metric} '
-       f'{out["reference_wins"]} of {n} episodes']
+      [f'reference: {out["reference"]}: {metric} {reference}']
       + _aligned([('model', metric, *counts)]
-                 + [(r['model'], f'{r["wins"]} of {n}', *tail(r))
+                 + [(r['model'], score(r), *tail(r))
                     for r in out['models']], left=1))
 
 

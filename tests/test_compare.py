@@ -119,6 +119,42 @@ def test_paired_with_compares_each_run_with_its_own_and_pools(tmp_path,
                                         paired_with=(moved,)))
 
 
+def test_a_graded_figure_is_the_sign_test_over_the_untied_episodes(
+    tmp_path, capsys):
+  starts = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]
+  ref = _write(tmp_path / 'a.json',
+               _model([0] * 6, starts=starts, crossed=[3, 2, 4, 0, 5, 1]))
+  # Against the reference it is higher in episodes 1 and 3, lower in 0, 2
+  # and 4, tied in 5.
+  other = _write(tmp_path / 'b.json',
+                 _model([0] * 6, agent='mappo', starts=starts,
+                        crossed=[1, 3, 0, 1, 4, 1]))
+  out = compare.compare(compare.CompareArgs(evaluations=(ref, other),
+                                            metric='crossed'))
+  assert not out['binary'] and out['reference_mean'] == pytest.approx(2.5)
+  row, = out['models']
+  assert (row['mean'], row['ties'], row['reference_higher'],
+          row['model_higher']) == (pytest.approx(10 / 6), 1, 3, 2)
+  assert row['p'] == compare.mcnemar_p(3, 2)
+  compare.main(['--evaluations', ref, other, '--metric', 'crossed'])
+  lines = capsys.readouterr().out.splitlines()
+  assert lines[0] == f'reference: {ref}: crossed mean 2.5 over 6 episodes'
+  assert lines[1].endswith('model higher  exact sign test p')
+  assert lines[2].split()[-5:-1] == ['1.667', '1', '3', '2']
+  # Paired runs pool their untied episodes and their means.
+  twin = _write(tmp_path / 'c.json',
+                _model([0] * 6, seed=0, starts=starts, crossed=[3] * 6))
+  pooled = compare.compare(compare.CompareArgs(
+      evaluations=(ref,), paired_with=(twin,), metric='crossed'))['pooled']
+  assert pooled == {'episodes': 6, 'ties': 1, 'reference_higher': 2,
+                    'model_higher': 3, 'reference_mean': pytest.approx(2.5),
+                    'mean': pytest.approx(3.0),
+                    'p': compare.mcnemar_p(2, 3)}
+  # `success` stays 0 / 1: McNemar's counts, not means.
+  assert compare.compare(compare.CompareArgs(
+      evaluations=(ref, other)))['binary']
+
+
 def test_a_coop_paper_cell_folder_reads_its_trained_population(tmp_path):
   cell = tmp_path / 'transport_hrl_n4_s0'
   cell.mkdir()
@@ -157,7 +193,7 @@ def test_a_cell_folder_without_its_trained_population_is_an_error(tmp_path):
                   "['start_agent_cylinder']"),
     ('eval_seed', "evaluation seed 7, the reference's 1000"),
     ('task', 'evaluated on transport_n5'),
-    ('metric', 'not 0 / 1'),
+    ('nan_figure', "'return' is NaN in episode 1"),
     ('missing', "no episode figure 'reached'"),
     ('one', 'name two or more'),
 ])
@@ -172,14 +208,15 @@ def test_unpairable_evaluations_are_errors(tmp_path, capsys, case, message):
       'no_starts': _model([1, 0, 1]),
       'eval_seed': _model([1, 0, 1], starts=starts),
       'task': _model([1, 0, 1], n_agents=5, starts=starts),
-      'metric': _model([1, 0, 1], starts=starts),
+      'nan_figure': _model([1, 0, 1], starts=starts,
+                           **{'return': [3.0, float('nan'), 1.0]}),
       'missing': _model([1, 0, 1], starts=starts),
       'one': None,
   }[case]
   paths = [ref] if other is None else [
       ref, _write(tmp_path / 'b.json', other,
                   paper={'eval_seed': 7 if case == 'eval_seed' else 1000})]
-  metric = {'metric': ['--metric', 'return'],
+  metric = {'nan_figure': ['--metric', 'return'],
             'missing': ['--metric', 'reached']}.get(case, [])
   with pytest.raises(SystemExit) as exit_info:
     compare.main(['--evaluations', *paths, *metric])
