@@ -213,10 +213,10 @@ def _check_paired(reference: Model, other: Model) -> None:
 
 BINARY_COUNTS = ('reference_wins', 'wins', 'both', 'reference_only',
                  'model_only')
-"""A 0 / 1 figure's counts (summed when pairs are pooled); the discordant
-ones are `reference_only` and `model_only`."""
+"""A 0 / 1 figure's counts (summed when pairs are pooled); the last two
+are the discordant ones."""
 GRADED_COUNTS = ('ties', 'reference_higher', 'model_higher')
-"""A graded figure's counts; the discordant ones are the two `_higher`."""
+"""A graded figure's counts; the last two are the discordant ones."""
 
 
 def _pair(reference: Model, other: Model, metric: str, binary: bool) -> dict:
@@ -229,37 +229,32 @@ def _pair(reference: Model, other: Model, metric: str, binary: bool) -> dict:
     raise ValueError(f'{other.label}: {len(figures)} episodes, the '
                      f'reference {len(ref)}: not the same episodes')
   _check_paired(reference, other)
-  pair = {'episodes': len(ref), 'model': other.label}
-  if binary:
-    only_ref = sum(a > b for a, b in zip(ref, figures))
-    only_other = sum(b > a for a, b in zip(ref, figures))
-    return {**pair, 'reference_wins': int(sum(ref)), 'wins': int(sum(figures)),
-            'both': sum(a == b == 1 for a, b in zip(ref, figures)),
-            'reference_only': only_ref, 'model_only': only_other,
-            'p': mcnemar_p(only_ref, only_other)}
+  # The discordant episodes: on a 0 / 1 figure those only one model wins.
   higher_ref = sum(a > b for a, b in zip(ref, figures))
   higher_other = sum(b > a for a, b in zip(ref, figures))
+  pair = {'episodes': len(ref), 'model': other.label,
+          'p': mcnemar_p(higher_ref, higher_other)}
+  if binary:
+    return {**pair, 'reference_wins': int(sum(ref)), 'wins': int(sum(figures)),
+            'both': sum(a == b == 1 for a, b in zip(ref, figures)),
+            'reference_only': higher_ref, 'model_only': higher_other}
   return {**pair, 'reference_mean': sum(ref) / len(ref),
           'mean': sum(figures) / len(figures),
           'ties': len(ref) - higher_ref - higher_other,
-          'reference_higher': higher_ref, 'model_higher': higher_other,
-          'p': mcnemar_p(higher_ref, higher_other)}
+          'reference_higher': higher_ref, 'model_higher': higher_other}
 
 
 def _pool(rows: list[dict], binary: bool) -> dict:
   """`rows`' counts summed (graded: their means over all their episodes)
   and the exact test of the summed discordant episodes."""
   episodes = sum(r['episodes'] for r in rows)
-  pooled = {'episodes': episodes, **{
-      k: sum(r[k] for r in rows)
-      for k in (BINARY_COUNTS if binary else GRADED_COUNTS)}}
-  if binary:
-    pooled['p'] = mcnemar_p(pooled['reference_only'], pooled['model_only'])
-    return pooled
-  for k in ('reference_mean', 'mean'):
-    pooled[k] = sum(r[k] * r['episodes'] for r in rows) / episodes
-  pooled['p'] = mcnemar_p(pooled['reference_higher'], pooled['model_higher'])
-  return pooled
+  counts = BINARY_COUNTS if binary else GRADED_COUNTS
+  pooled = {'episodes': episodes,
+            **{k: sum(r[k] for r in rows) for k in counts}}
+  if not binary:
+    for k in ('reference_mean', 'mean'):
+      pooled[k] = sum(r[k] * r['episodes'] for r in rows) / episodes
+  return {**pooled, 'p': mcnemar_p(*(pooled[k] for k in counts[-2:]))}
 
 
 def _by_run(models: list[Model], flag: str) -> dict[tuple[str, str], Model]:
