@@ -5,7 +5,8 @@ no simulation) and `--baselines` (the difficulty references), and writes
 markdown: per table, our success rate +- standard error over all models x
 episodes, the spread between models (standard error of the per-model
 rates), how many of the declared models are in, the paper's figure and the
-greedy and oracle references beside; the curriculum stages' own
+greedy and oracle references beside (IPPO against MAPPO: the Ants
+through an episode too); the curriculum stages' own
 evaluations in a table of their own; with `--figures`, the learning
 curves of the committed cells (their metrics.csv) as PNGs, linked; then
 each cell's command.
@@ -28,6 +29,10 @@ SCALING_SEEDS = 3
 """Fig. 4a's models per population."""
 FIGURE_COLUMNS = ('success', 'return')
 """What the learning-curve figures show (training windows of metrics.csv)."""
+THROUGH = 'crossed'
+"""The corridor's Ants through the slit in an episode: the IPPO-MAPPO
+table's figure beside success, which with 6 and 7 Ants is near 0 for the
+learners and the references alike."""
 BEGIN, END = '<!-- paper:begin -->', '<!-- paper:end -->'
 
 
@@ -53,9 +58,9 @@ def _episodes(evaluation: dict[str, Any], metric: str) -> list[float]:
           for value in metrics[metric]]
 
 
-def summarize(cells, n_agents: int, args: paper.PaperArgs
-              ) -> dict[str, Any]:
-  """Success and return over the models of `cells` evaluated at
+def summarize(cells, n_agents: int, args: paper.PaperArgs,
+              metrics=('success', 'return')) -> dict[str, Any]:
+  """Each of `metrics` over the models of `cells` evaluated at
   `n_agents`: pooled over all episodes, with the spread between models
   (`evaluate.mean_and_error`, as coop-eval does), and how many of the
   declared models are in ('models', 'declared')."""
@@ -67,7 +72,7 @@ def summarize(cells, n_agents: int, args: paper.PaperArgs
                               for c, e in evaluated})}
   if not evaluations:
     return out
-  for metric in ('success', 'return'):
+  for metric in metrics:
     per_model = [_episodes(e, metric) for e in evaluations]
     out[metric], out[f'{metric}_se'] = evaluate.mean_and_error(
         [v for values in per_model for v in values])
@@ -119,6 +124,24 @@ def _steps(count: int) -> str:
 def _reference(references, task, n_agents, policy) -> str:
   out = references.get(task, {}).get((n_agents, policy))
   return '' if out is None else baselines.success_cell(out)
+
+
+def _through(summary) -> str:
+  """Our models' Ants through an episode +- standard error, or ''."""
+  if not summary['models']:
+    return ''
+  return f'{summary[THROUGH]:.2f} +- {summary[f"{THROUGH}_se"]:.2f}'
+
+
+def _reference_through(references, n_agents) -> str:
+  """The corridor's greedy and oracle references' Ants through an episode
+  (their per-episode figures), 'greedy / oracle'."""
+  def mean(policy):
+    out = references.get('corridor', {}).get((n_agents, policy))
+    values = [e[THROUGH] for e in (out or {}).get('per_episode', ())
+              if THROUGH in e]
+    return f'{sum(values) / len(values):.2f}' if values else '?'
+  return ' / '.join(mean(p) for p in ('greedy', 'oracle'))
 
 
 def _row(cells) -> str:
@@ -272,7 +295,7 @@ def report(args: paper.PaperArgs, plan=None) -> str:
                            _rate(*paper_plan.PAPER_TABLE2[task][n]),
                            *refs(task, n)]))
     lines.append('')
-  lines += _curves_tables(plan, args, columns, refs)
+  lines += _curves_tables(plan, args, columns, refs, references)
   stages = {}  # (experiment, task, agent, stage, n_agents) -> its cells.
   for c in plan:
     if c.stage:
@@ -336,7 +359,7 @@ def report(args: paper.PaperArgs, plan=None) -> str:
   return '\n'.join(lines)
 
 
-def _curves_tables(plan, args, columns, refs) -> list[str]:
+def _curves_tables(plan, args, columns, refs, references) -> list[str]:
   """IPPO vs MAPPO (Fig. 4b, c) and training population (Fig. 4a): the
   paper shows curves only, so its column is a note."""
   lines = []
@@ -346,15 +369,17 @@ def _curves_tables(plan, args, columns, refs) -> list[str]:
     lines += ['### IPPO against MAPPO on the corridor (Fig. 4b, c)', '',
               f'Paper: {paper_plan.PAPER_FIGURE4["mappo"]}.', '',
               *_header(['Ants', 'variant', *columns, 'return +- SE',
-                        'greedy', 'oracle'])]
+                        'Ants through +- SE', 'greedy', 'oracle',
+                        'Ants through: greedy / oracle'])]
     for n, agent in mappo:
       summary = summarize(_models(plan, 'mappo', 'corridor', agent, n), n,
-                          args)
+                          args, metrics=('success', 'return', THROUGH))
       name = 'IPPO (`hrl`)' if agent == 'hrl' else paper_plan.VARIANT_NAMES[
           agent]
       lines.append(_row([str(n), name, *_ours(summary),
-                         _ours(summary, 'return')[0],
-                         *refs('corridor', n)]))
+                         _ours(summary, 'return')[0], _through(summary),
+                         *refs('corridor', n),
+                         _reference_through(references, n)]))
     lines.append('')
   scaling = _scaling_models(plan)
   if scaling:

@@ -75,10 +75,13 @@ def _rows(path):
     return list(csv.DictReader(f))
 
 
-def _evaluation(cell, n_agents, successes, env_steps=20_000_000):
+def _evaluation(cell, n_agents, successes, env_steps=20_000_000, **figures):
   """An eval JSON as `paper.evaluate_cell` writes it, with these
-  per-episode successes (and from seed 1 on, transport's start figures)."""
-  episodes = [{'return': 100.0 * s, 'success': float(s)} for s in successes]
+  per-episode successes and `figures` (and from seed 1 on, transport's
+  start figures)."""
+  episodes = [{'return': 100.0 * s, 'success': float(s),
+               **{k: v[i] for k, v in figures.items()}}
+              for i, s in enumerate(successes)]
   if cell.seed >= 1:
     for i, episode in enumerate(episodes):
       episode.update(start_agent_cylinder=2.0 + i, start_cylinder_target=4.0)
@@ -89,8 +92,9 @@ def _evaluation(cell, n_agents, successes, env_steps=20_000_000):
           'marl_eval': marl_eval.layout([model])}
 
 
-def _commit(cell, args, evaluations, env_steps=20_000_000):
-  """Writes a done cell into args.results: {population: successes}."""
+def _commit(cell, args, evaluations, env_steps=20_000_000, **figures):
+  """Writes a done cell into args.results: {population: successes}, and
+  per-episode `figures` ({name: values}) beside."""
   folder = paper.results_directory(cell, args)
   os.makedirs(folder, exist_ok=True)
   with open(os.path.join(folder, 'metrics.csv'), 'w') as f:
@@ -98,7 +102,7 @@ def _commit(cell, args, evaluations, env_steps=20_000_000):
             f'2,32,50.0,{cell.seed / 10}\n')
   for n, successes in evaluations.items():
     evaluate.write_json(os.path.join(folder, paper.EVAL_FILE.format(n)),
-                        _evaluation(cell, n, successes, env_steps))
+                        _evaluation(cell, n, successes, env_steps, **figures))
 
 
 def test_dry_run_prints_every_cell_with_its_status(tmp_path, capsys):
@@ -1108,6 +1112,19 @@ def test_report_rebuilds_the_tables_from_committed_results(tmp_path, capsys,
   _commit(pushers, args, {2: [1, 1, 1, 0]}, env_steps=10_000_000)
   assert ('| ravine | HRL | pushers | 2 pushers (2 markers) | 75.0% +- 25.0 '
           '|  | 1/5 | 10M |') in paper_report.report(args)
+  # Fig. 4b, c: beside success, the Ants through an episode, ours and the
+  # references' (their per-episode figures in results/baselines).
+  mappo = next(c for c in paper_plan.PLAN if (c.experiment, c.agent,
+                                              c.n_agents) == ('mappo',
+                                                              'mappo', 6))
+  _commit(mappo, args, {6: [0, 1, 0, 0]}, crossed=[2, 6, 3, 1])
+  with open(os.path.join(BASELINES, 'corridor_n6_oracle.json')) as f:
+    oracle = [e['crossed'] for e in json.load(f)['per_episode']]
+  row = next(line for line in paper_report.report(args).splitlines()
+             if line.startswith('| 6 | MAPPO (`mappo`) |'))
+  assert row.split(' | ')[7] == '3.00 +- 1.08'  # std(ddof=1) / sqrt(4).
+  assert row.split(' | ')[-1].endswith(f' / {sum(oracle) / len(oracle):.2f} |')
+  assert '| 7 | IPPO (`hrl`) | not run |  | 0/3 |  |  |  |' in text
   # Runs end a few steps past their budget: the same figure is given once.
   _commit(next(c for c in paper_plan.PLAN if c.stage == 'pushers'
                and c.agent == pushers.agent and c.seed == pushers.seed + 1),
