@@ -179,7 +179,9 @@ def _figures(model: Model, metric: str) -> list[float]:
 
 def _binary(models: list[Model], metric: str) -> bool:
   """Whether `metric` is 0 / 1 in every episode of every one of `models`
-  (wins and losses: McNemar), else graded (the sign test)."""
+  (wins and losses: McNemar), else graded (the sign test). Decided by the
+  figures, not by the figure's name: Ants through that never exceed 1 read
+  as wins, with the same p (the sign test on 0 / 1 figures is McNemar's)."""
   return all(v in (0, 1) for m in models for v in _figures(m, metric))
 
 
@@ -322,6 +324,12 @@ def _aligned(rows: list[tuple[str, ...]], left: int) -> list[str]:
           for row in rows]
 
 
+def _mean(value: float) -> str:
+  """A graded figure's mean: 4 significant digits, whole numbers from
+  1,000 (returns)."""
+  return f'{value:,.0f}' if abs(value) >= 1000 else f'{value:.4g}'
+
+
 def table(out: dict) -> str:
   """`compare`'s result as aligned text."""
   metric, binary = out['metric'], out['binary']
@@ -340,7 +348,7 @@ def table(out: dict) -> str:
   def score(r, prefix=''):
     if binary:
       return f'{r[prefix + "wins"]} of {r["episodes"]}'
-    return f'{r[prefix + "mean"]:.4g}'
+    return _mean(r[prefix + 'mean'])
 
   if 'pairs' in out:
     pooled = out['pooled']
@@ -355,7 +363,7 @@ def table(out: dict) -> str:
         left=2))
   n = out['episodes']
   reference = (f'{out["reference_wins"]} of {n} episodes' if binary else
-               f'{out["reference_mean"]:.4g} over {n} episodes')
+               f'{_mean(out["reference_mean"])} over {n} episodes')
   return '\n'.join(
       [f'reference: {out["reference"]}: {metric} {reference}']
       + _aligned([('model', metric, *counts)]

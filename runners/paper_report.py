@@ -73,7 +73,10 @@ def summarize(cells, n_agents: int, args: paper.PaperArgs,
   if not evaluations:
     return out
   for metric in metrics:
-    per_model = [_episodes(e, metric) for e in evaluations]
+    try:
+      per_model = [_episodes(e, metric) for e in evaluations]
+    except KeyError:  # An evaluation without it (older files): left out.
+      continue
     out[metric], out[f'{metric}_se'] = evaluate.mean_and_error(
         [v for values in per_model for v in values])
     out[f'{metric}_spread'] = evaluate.mean_and_error(
@@ -127,21 +130,25 @@ def _reference(references, task, n_agents, policy) -> str:
 
 
 def _through(summary) -> str:
-  """Our models' Ants through an episode +- standard error, or ''."""
-  if not summary['models']:
+  """Our models' Ants through an episode +- standard error, or '' (no
+  model, or one whose evaluation lacks the figure)."""
+  if THROUGH not in summary:
     return ''
   return f'{summary[THROUGH]:.2f} +- {summary[f"{THROUGH}_se"]:.2f}'
 
 
 def _reference_through(references, n_agents) -> str:
   """The corridor's greedy and oracle references' Ants through an episode
-  (their per-episode figures), 'greedy / oracle'."""
-  def mean(policy):
-    out = references.get('corridor', {}).get((n_agents, policy))
-    values = [e[THROUGH] for e in (out or {}).get('per_episode', ())
-              if THROUGH in e]
-    return f'{sum(values) / len(values):.2f}' if values else '?'
-  return ' / '.join(mean(p) for p in ('greedy', 'oracle'))
+  (their per-episode figures), 'greedy / oracle': '' without either
+  reference, '?' for one whose episodes do not all record it."""
+  def mean(out):
+    episodes = out.get('per_episode', ())
+    if not episodes or any(THROUGH not in e for e in episodes):
+      return '?'
+    return f'{evaluate.mean_and_error([e[THROUGH] for e in episodes])[0]:.2f}'
+  found = [references.get('corridor', {}).get((n_agents, p))
+           for p in ('greedy', 'oracle')]
+  return '' if None in found else ' / '.join(mean(out) for out in found)
 
 
 def _row(cells) -> str:

@@ -141,18 +141,32 @@ def test_a_graded_figure_is_the_sign_test_over_the_untied_episodes(
   assert lines[0] == f'reference: {ref}: crossed mean 2.5 over 6 episodes'
   assert lines[1].endswith('model higher  exact sign test p')
   assert lines[2].split()[-5:-1] == ['1.667', '1', '3', '2']
-  # Paired runs pool their untied episodes and their means.
-  twin = _write(tmp_path / 'c.json',
-                _model([0] * 6, seed=0, starts=starts, crossed=[3] * 6))
-  pooled = compare.compare(compare.CompareArgs(
-      evaluations=(ref,), paired_with=(twin,), metric='crossed'))['pooled']
-  assert pooled == {'episodes': 6, 'ties': 1, 'reference_higher': 2,
-                    'model_higher': 3, 'reference_mean': pytest.approx(2.5),
-                    'mean': pytest.approx(3.0),
-                    'p': compare.mcnemar_p(2, 3)}
-  # `success` stays 0 / 1: McNemar's counts, not means.
+  # Paired runs pool their untied episodes and their means over all their
+  # episodes: seed 0 (6 episodes, means 2.5 and 3) and seed 1 (2 episodes,
+  # 0 / 1 in the reference, means 0.5 and 4).
+  twins = (_write(tmp_path / 'c.json', _model([0] * 6, seed=0, starts=starts,
+                                              crossed=[3] * 6)),
+           _write(tmp_path / 'd.json', _model([0] * 2, seed=1,
+                                              starts=starts[:2],
+                                              crossed=[5, 3])))
+  short = _write(tmp_path / 'e.json', _model([0] * 2, seed=1,
+                                             starts=starts[:2],
+                                             crossed=[1, 0]))
+  out = compare.compare(compare.CompareArgs(
+      evaluations=(ref, short), paired_with=twins, metric='crossed'))
+  assert out['pooled'] == {
+      'episodes': 8, 'ties': 1, 'reference_higher': 2, 'model_higher': 5,
+      'reference_mean': pytest.approx((15 + 1) / 8),
+      'mean': pytest.approx((18 + 8) / 8), 'p': compare.mcnemar_p(2, 5)}
+  # A figure that is 0 / 1 in one model and graded in the other is graded
+  # for both; `success`, 0 / 1 everywhere, stays McNemar's wins.
+  assert not compare.compare(compare.CompareArgs(
+      evaluations=(short, twins[1]), metric='crossed'))['binary']
   assert compare.compare(compare.CompareArgs(
       evaluations=(ref, other)))['binary']
+  # Means from 1,000 up in whole numbers (returns).
+  assert compare._mean(1641.72) == '1,642'  # pylint: disable=protected-access
+  assert compare._mean(3.0149) == '3.015'  # pylint: disable=protected-access
 
 
 def test_a_coop_paper_cell_folder_reads_its_trained_population(tmp_path):
