@@ -897,12 +897,19 @@ def test_concurrent_cells_pass_over_cells_run_elsewhere(tmp_path,
   assert (f'{joint.path}: starts from ravine_hrl_pushers_n2_s1, which '
           'another coop-paper runs; passed over') in lines
   # Published by the other process while the crossers trained here: the
-  # joint cell starts once both stages are in, and nothing is left.
+  # joint cell starts once both stages are in, and nothing is left. The
+  # crossers train until the corridor has taken the pushers' slot (on a
+  # busy machine both 0.1 s processes could end before one look).
   started, lines = [], []
+  corridor_started = tmp_path / 'corridor_started'
 
   def start_publishing(cell, own, deadline):
     if cell == crossers:
       _commit(pushers, args, {2: [1, 0]})
+      started.append(cell)
+      return _FakeCellProcess(60, until=str(corridor_started))
+    if cell == corridor:
+      corridor_started.touch()
     return start(cell, own, deadline)
   assert paper.run_concurrently(args, cells, lines.append, None,
                                 start=start_publishing) is None
