@@ -886,10 +886,10 @@ def test_concurrent_cells_pass_over_cells_run_elsewhere(tmp_path,
       'ravine/hrl/n2/s1', 'corridor/hrl/n4/s1')
   started, lines = [], []
 
-  def start(cell, own, deadline):
+  def start(cell, own, deadline, seconds=0.1, until=None):
     started.append(cell)  # The pushers' process finds them claimed.
-    return _FakeCellProcess(0.1, paper.EXIT_RUN_ELSEWHERE if cell == pushers
-                            else 0)
+    return _FakeCellProcess(seconds, paper.EXIT_RUN_ELSEWHERE
+                            if cell == pushers else 0, until=until)
   args = _args(tmp_path, concurrent=2)
   assert paper.run_concurrently(args, cells, lines.append, None,
                                 start=start) == paper.ELSEWHERE
@@ -906,8 +906,7 @@ def test_concurrent_cells_pass_over_cells_run_elsewhere(tmp_path,
   def start_publishing(cell, own, deadline):
     if cell == crossers:
       _commit(pushers, args, {2: [1, 0]})
-      started.append(cell)
-      return _FakeCellProcess(60, until=str(corridor_started))
+      return start(cell, own, deadline, 60, str(corridor_started))
     if cell == corridor:
       corridor_started.touch()
     return start(cell, own, deadline)
