@@ -411,6 +411,8 @@ def _read(checkpoint: str, items=_ITEMS) -> dict[str, Any]:
   import orbax.checkpoint as ocp  # pylint: disable=g-import-not-at-top
   restore = {'learners': ocp.args.PyTreeRestore,
              'state': ocp.args.JsonRestore}
+  if 'learners' in items:
+    _check_arrays_stored(checkpoint)
   try:
     with ocp.Checkpointer(ocp.CompositeCheckpointHandler()) as checkpointer:
       read = checkpointer.restore(os.path.abspath(checkpoint),
@@ -439,6 +441,41 @@ def _read(checkpoint: str, items=_ITEMS) -> dict[str, Any]:
     saved = {name: _unpacked(checkpoint, name, saved[name], entry, padding)
              for name, entry in learners.items()}
   return {'state': state, 'learners': saved}
+
+
+def _check_arrays_stored(checkpoint: str) -> None:
+  """Reads every value of the learners' OCDBT store (array metadata and
+  chunks, as stored) through TensorStore, waiting on each: an array file
+  cut short or lost (a full disk, a copy cut short) is named here, before
+  orbax reads the step.
+
+  Orbax reads the arrays concurrently (one `asyncio.gather` over every
+  array's TensorStore open, then every read) in an event loop of its own
+  that it closes as soon as the first error comes back, without cancelling
+  or awaiting the other reads; those finish in TensorStore's threads and
+  post their results to the closed loop ('Exception ignored in: None ...
+  RuntimeError: Event loop is closed', at any later moment, and at times
+  asyncio's 'Future exception was never retrieved'). Read here, nothing is
+  left in flight when one fails (no read has an asyncio callback).
+
+  Raises:
+    CorruptCheckpoint: a value of the store cannot be read.
+  """
+  import tensorstore as ts  # pylint: disable=g-import-not-at-top
+  learners = os.path.join(os.path.abspath(checkpoint), 'learners')
+  if not os.path.exists(os.path.join(learners, 'manifest.ocdbt')):
+    return  # Not OCDBT (or no learners at all): orbax names what fails.
+  try:
+    store = ts.KvStore.open({'driver': 'ocdbt', 'base': {
+        'driver': 'file', 'path': learners + os.sep}}).result()
+    keys = store.list().result()
+    reads = [store.read(key) for key in keys]
+    for key, read in zip(keys, reads):
+      if read.result().state != 'value':
+        raise ValueError(f'{key.decode()} is listed but missing')
+  except Exception as e:  # pylint: disable=broad-except
+    # TensorStore raises ValueError (OUT_OF_RANGE, DATA_LOSS...), OSError.
+    raise CorruptCheckpoint(f'{checkpoint} cannot be read ({e}).') from None
 
 
 def _unpacked(checkpoint: str, species: str, arrays: Any, entry: Any,
