@@ -411,9 +411,9 @@ def _read(checkpoint: str, items=_ITEMS) -> dict[str, Any]:
   import orbax.checkpoint as ocp  # pylint: disable=g-import-not-at-top
   restore = {'learners': ocp.args.PyTreeRestore,
              'state': ocp.args.JsonRestore}
-  if 'learners' in items:
-    _check_arrays_stored(checkpoint)
   try:
+    if 'learners' in items:
+      _check_arrays_stored(checkpoint)
     with ocp.Checkpointer(ocp.CompositeCheckpointHandler()) as checkpointer:
       read = checkpointer.restore(os.path.abspath(checkpoint),
                                   args=ocp.args.Composite(**{
@@ -459,23 +459,20 @@ def _check_arrays_stored(checkpoint: str) -> None:
   left in flight when one fails (no read has an asyncio callback).
 
   Raises:
-    CorruptCheckpoint: a value of the store cannot be read.
+    ValueError, OSError: a value of the store cannot be read (TensorStore's
+      OUT_OF_RANGE, DATA_LOSS...), named by `_read` as CorruptCheckpoint.
   """
   import tensorstore as ts  # pylint: disable=g-import-not-at-top
   learners = os.path.join(os.path.abspath(checkpoint), 'learners')
   if not os.path.exists(os.path.join(learners, 'manifest.ocdbt')):
     return  # Not OCDBT (or no learners at all): orbax names what fails.
-  try:
-    store = ts.KvStore.open({'driver': 'ocdbt', 'base': {
-        'driver': 'file', 'path': learners + os.sep}}).result()
-    keys = store.list().result()
-    reads = [store.read(key) for key in keys]
-    for key, read in zip(keys, reads):
-      if read.result().state != 'value':
-        raise ValueError(f'{key.decode()} is listed but missing')
-  except Exception as e:  # pylint: disable=broad-except
-    # TensorStore raises ValueError (OUT_OF_RANGE, DATA_LOSS...), OSError.
-    raise CorruptCheckpoint(f'{checkpoint} cannot be read ({e}).') from None
+  store = ts.KvStore.open({'driver': 'ocdbt', 'base': {
+      'driver': 'file', 'path': learners + os.sep}}).result()
+  keys = store.list().result()
+  reads = [store.read(key) for key in keys]
+  for key, read in zip(keys, reads):
+    if read.result().state != 'value':
+      raise ValueError(f'{key.decode()} is listed but missing')
 
 
 def _unpacked(checkpoint: str, species: str, arrays: Any, entry: Any,
