@@ -57,7 +57,7 @@ import logging
 import os
 import shutil
 import sys
-from typing import Any, Callable, Mapping, Optional
+from typing import Any, Callable, Mapping, Optional, Sequence
 
 from runners import packing
 from runners import run_dir
@@ -513,18 +513,32 @@ def check_complete(checkpoint: str) -> dict[str, Any]:
 def saved_learner(checkpoint: str, species: str) -> dict[str, Any]:
   """One species' saved learner state (for `Learner.restore` or
   `initialize_from`)."""
+  return saved_learners(checkpoint, (species,))[species]
+
+
+def saved_learners(checkpoint: str,
+                   species: Sequence[str]) -> dict[str, dict[str, Any]]:
+  """{species: saved learner state} of `species`, the checkpoint read once.
+
+  Raises:
+    ValueError: `checkpoint` holds no learner for one of `species`.
+  """
   if not _is_step(checkpoint):
     from agents import checkpointing  # pylint: disable=g-import-not-at-top
-    path = os.path.join(checkpoint, f'{species}.msgpack')
-    if not os.path.exists(path):
-      raise ValueError(f'{checkpoint} holds no learner for species '
-                       f'{species!r}.')
-    return checkpointing.read_file(path)
+    paths = {name: os.path.join(checkpoint, f'{name}.msgpack')
+             for name in species}
+    for name, path in paths.items():
+      if not os.path.exists(path):
+        raise ValueError(f'{checkpoint} holds no learner for species '
+                         f'{name!r}.')
+    return {name: checkpointing.read_file(path)
+            for name, path in paths.items()}
   read = _read(checkpoint)
-  if species not in read['learners']:
-    raise ValueError(f'{checkpoint} holds no learner for species '
-                     f'{species!r}.')
-  return _saved_learner(read, species)
+  for name in species:
+    if name not in read['learners']:
+      raise ValueError(f'{checkpoint} holds no learner for species '
+                       f'{name!r}.')
+  return {name: _saved_learner(read, name) for name in species}
 
 
 def _saved_learner(read: dict[str, Any], species: str) -> dict[str, Any]:
@@ -542,9 +556,9 @@ def restore(checkpoint: str, learners: Mapping[str, Any]) -> dict[str, Any]:
   """
   state = read_state(checkpoint)
   check_resumable(checkpoint, state)
+  saved = saved_learners(checkpoint, tuple(learners))
   for name, learner in learners.items():
-    learner.restore(saved_learner(checkpoint, name),
-                    source=f'{checkpoint} ({name})')
+    learner.restore(saved[name], source=f'{checkpoint} ({name})')
   return state
 
 

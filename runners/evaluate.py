@@ -208,7 +208,10 @@ def load_model(path: str, args: EvalArgs):
   spec = envs_lib.EnvSpec(train.task, train.n_agents, options,
                           config.uses_commands, train.command_period, files,
                           config.adds_locomotion_terms)
-  models = {s['name']: _load_policy(checkpoint, state, config, s)
+  parameters = checkpoints.saved_learners(
+      checkpoint, [s['name'] for s in state['species']])  # Read once.
+  models = {s['name']: _load_policy(checkpoint, state, config, s,
+                                    parameters[s['name']])
             for s in state['species']}
   borrowed = {}
   if args.policy_from:
@@ -251,8 +254,10 @@ def load_model(path: str, args: EvalArgs):
           f'{list(saved[0]["observation_keys"])}, {path}\'s agent '
           f'{list(layout[name].observation_keys)}.')
     # Its own noise stream: the evaluated layout's index, not its run's.
-    models[name] = _load_policy(other, other_state, other_config, {
-        **saved[0], 'species_id': layout[name].species_id})
+    models[name] = _load_policy(
+        other, other_state, other_config,
+        {**saved[0], 'species_id': layout[name].species_id},
+        checkpoints.saved_learner(other, name))
     borrowed[name] = other
   return spec, config, models, {**state, 'checkpoint': checkpoint,
                                 'policy_from': borrowed}
@@ -270,11 +275,11 @@ def _controller_files(checkpoint, paradigm, config, args):
       copy if os.path.exists(os.path.join(copy, 'config.json')) else ''))
 
 
-def _load_policy(checkpoint, state, config, saved):
+def _load_policy(checkpoint, state, config, saved, parameters):
   """(Species, builder, networks, learner) of the species `saved` (one of
-  `state['species']`) of the checkpoint (its `state`, agent `config`)."""
+  `state['species']`) of the checkpoint (its `state`, agent `config`), its
+  learner set from `parameters` (`checkpoints.saved_learner`)."""
   from agents.hierarchy import builder as hierarchy_builder  # pylint: disable=g-import-not-at-top
-  from runners import checkpoints  # pylint: disable=g-import-not-at-top
   from runners import envs as envs_lib  # pylint: disable=g-import-not-at-top
   species = envs_lib.Species(**{**saved, 'agents': tuple(saved['agents']),
                                 'observation_keys': tuple(
@@ -284,7 +289,6 @@ def _load_policy(checkpoint, state, config, saved):
                                    species.action_size,
                                    species.global_state_size)
   learner = builder.make_learner(networks)
-  parameters = checkpoints.saved_learner(checkpoint, species.name)
   source = f'{checkpoint} ({species.name})'
   if state.get('policy_only'):  # Parameters and statistics are all it has.
     learner.initialize_from(parameters, source=source)

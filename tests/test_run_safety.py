@@ -799,3 +799,38 @@ def test_a_damaged_checkpoint_is_named_before_orbax_reads_it(
   assert not restores  # Named before orbax reads it...
   time.sleep(0.5)  # ...so no read is left in flight to report later.
   assert not unraisable
+
+
+class _Restored:
+  """A learner that records what `restore` gives it."""
+
+  def __init__(self):
+    self.saved = None
+
+  def restore(self, saved, source):
+    self.saved = (saved['state']['w'][0], source)
+
+
+def test_a_run_resumes_every_species_from_one_read_of_its_step(
+    tmp_path, monkeypatch):
+  """Each read of a step is every array of it: a ravine run restores its
+  pushers and crossers from one, and names a species the step lacks."""
+  path = checkpoints.save(
+      str(tmp_path), {'pusher': FakeLearner(1.0), 'crosser': FakeLearner(2.0)},
+      {'update': 3, 'species': [{'name': 'pusher'}, {'name': 'crosser'}]}, 3)
+  reads = []
+  read = checkpoints._read  # pylint: disable=protected-access
+
+  def counted(checkpoint, items=checkpoints._ITEMS):  # pylint: disable=protected-access
+    reads.append(tuple(items))
+    return read(checkpoint, items)
+
+  monkeypatch.setattr(checkpoints, '_read', counted)
+  learners = {'pusher': _Restored(), 'crosser': _Restored()}
+  assert checkpoints.restore(path, learners)['update'] == 3
+  assert learners['pusher'].saved == (1.0, f'{path} (pusher)')
+  assert learners['crosser'].saved == (2.0, f'{path} (crosser)')
+  assert [items for items in reads if 'learners' in items] == [
+      ('learners', 'state')]
+  with pytest.raises(ValueError, match="no learner for species 'bee'"):
+    checkpoints.restore(path, {**learners, 'bee': _Restored()})
