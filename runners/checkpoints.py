@@ -523,22 +523,21 @@ def saved_learners(checkpoint: str,
   Raises:
     ValueError: `checkpoint` holds no learner for one of `species`.
   """
-  if not _is_step(checkpoint):
+  if _is_step(checkpoint):
+    read = _read(checkpoint)
+    saved = {name: _saved_learner(read, name) for name in species
+             if name in read['learners']}
+  else:
     from agents import checkpointing  # pylint: disable=g-import-not-at-top
     paths = {name: os.path.join(checkpoint, f'{name}.msgpack')
              for name in species}
-    for name, path in paths.items():
-      if not os.path.exists(path):
-        raise ValueError(f'{checkpoint} holds no learner for species '
-                         f'{name!r}.')
-    return {name: checkpointing.read_file(path)
-            for name, path in paths.items()}
-  read = _read(checkpoint)
-  for name in species:
-    if name not in read['learners']:
-      raise ValueError(f'{checkpoint} holds no learner for species '
-                       f'{name!r}.')
-  return {name: _saved_learner(read, name) for name in species}
+    saved = {name: checkpointing.read_file(path)
+             for name, path in paths.items() if os.path.exists(path)}
+  missing = [name for name in species if name not in saved]
+  if missing:
+    raise ValueError(f'{checkpoint} holds no learner for species '
+                     f'{missing[0]!r}.')
+  return saved
 
 
 def _saved_learner(read: dict[str, Any], species: str) -> dict[str, Any]:
