@@ -704,6 +704,11 @@ def run_cell(cell: paper_plan.Cell, args: PaperArgs,
   None."""
   from runners import checkpoints  # pylint: disable=g-import-not-at-top
   from runners import learner_loop  # pylint: disable=g-import-not-at-top
+  # Loaded before it trains, as the modules above: a process that trains
+  # for hours then evaluates with the code it trained with, whatever is
+  # edited on disk meanwhile (else a newer evaluate.py meets the older
+  # checkpoints module it holds).
+  from runners import evaluate, marl_eval  # pylint: disable=g-import-not-at-top,unused-import
   state = status(cell, args)
   if state.state == 'done':
     return None

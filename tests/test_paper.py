@@ -1042,6 +1042,49 @@ def test_a_concurrent_cell_trains_and_publishes_in_its_own_process(
       paper.results_directory(partial, args), 'metrics.csv'))] == [1, 2]
 
 
+# A cell's process, with `cell` and `args` given: records which of the
+# project's modules its evaluation imports (those it did not hold when its
+# training ended), then runs the cell as coop-paper does.
+_IMPORTS_AT_EVALUATION = """
+import json, sys
+from runners import paper
+project = ('agents', 'coop_suite', 'runners')
+held = lambda: {m for m in sys.modules if m.split('.')[0] in project}
+evaluate_cell, imported = paper.evaluate_cell, []
+def recorded(*args, **kwargs):
+  before = held()
+  out = evaluate_cell(*args, **kwargs)
+  imported.extend(sorted(held() - before))
+  return out
+paper.evaluate_cell = recorded
+assert paper.run_cell(cell, args, log=lambda line: None) is None
+print(json.dumps(imported))
+"""
+
+
+def test_a_cell_evaluates_with_the_code_it_trained_with(
+    controller, tiny_run, tmp_path, monkeypatch):  # pylint: disable=redefined-outer-name
+  """Its evaluation imports nothing after its training: code edited on
+  disk while a cell trains (a pull into the checkout) cannot give it an
+  evaluation module newer than the modules it trained with."""
+  import jax  # pylint: disable=g-import-not-at-top
+  for name in ('jax_compilation_cache_dir',  # The suite's (conftest.py).
+               'jax_persistent_cache_min_compile_time_secs',
+               'jax_persistent_cache_min_entry_size_bytes'):
+    monkeypatch.setenv(name.upper(), str(getattr(jax.config, name)))
+  cell = _tiny_plan(controller)[0]
+  args = _args(tmp_path)
+  shutil.copytree(tiny_run, paper.run_directory(cell, args))  # 1 update of 2.
+  script = (f'from runners import paper, paper_plan\n'
+            f'cell = paper_plan.{cell!r}\nargs = paper.{args!r}\n'
+            + _IMPORTS_AT_EVALUATION)
+  root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+  done = subprocess.run([sys.executable, '-c', script], cwd=root, check=True,
+                        capture_output=True, text=True, timeout=300)
+  assert json.loads(done.stdout.strip().splitlines()[-1]) == []
+  assert paper.status(cell, args).state == 'done'
+
+
 def test_report_rebuilds_the_tables_from_committed_results(tmp_path, capsys,
                                                           monkeypatch):
   args = _args(tmp_path, episodes=4)
