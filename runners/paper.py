@@ -708,7 +708,8 @@ def run_cell(cell: paper_plan.Cell, args: PaperArgs,
   # for hours then evaluates with the code it trained with, whatever is
   # edited on disk meanwhile (else a newer evaluate.py meets the older
   # checkpoints module it holds).
-  from runners import evaluate, marl_eval  # pylint: disable=g-import-not-at-top,unused-import
+  from runners import evaluate  # pylint: disable=g-import-not-at-top,unused-import
+  from runners import marl_eval  # pylint: disable=g-import-not-at-top,unused-import
   state = status(cell, args)
   if state.state == 'done':
     return None
