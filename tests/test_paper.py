@@ -29,6 +29,7 @@ from runners import paper_plan
 from runners import paper_report
 from runners import plot
 from runners import run_dir
+from tests.test_run_safety import REPO
 from tests.test_train import controller  # pylint: disable=unused-import
 from tests.test_train import STEPS
 from tests.test_train import TINY
@@ -1048,12 +1049,11 @@ def test_a_concurrent_cell_trains_and_publishes_in_its_own_process(
       paper.results_directory(partial, args), 'metrics.csv'))] == [1, 2]
 
 
-# A cell's process, with `cell` and `args` given: records which of the
-# project's modules its evaluation imports (those it did not hold when its
-# training ended), then runs the cell as coop-paper does.
+# A cell's process, with `paper`, `cell` and `args` given: records which
+# of the project's modules its evaluation imports (those it did not hold
+# when its training ended), then runs the cell as coop-paper does.
 _IMPORTS_AT_EVALUATION = """
 import json, sys
-from runners import paper
 project = ('agents', 'coop_suite', 'runners')
 held = lambda: {m for m in sys.modules if m.split('.')[0] in project}
 evaluate_cell, imported = paper.evaluate_cell, []
@@ -1080,8 +1080,7 @@ def test_a_cell_evaluates_with_the_code_it_trained_with(
   script = (f'from runners import paper, paper_plan\n'
             f'cell = paper_plan.{cell!r}\nargs = paper.{args!r}\n'
             + _IMPORTS_AT_EVALUATION)
-  root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-  done = subprocess.run([sys.executable, '-c', script], cwd=root,
+  done = subprocess.run([sys.executable, '-c', script], cwd=REPO,
                         capture_output=True, text=True, timeout=300)
   assert done.returncode == 0, done.stderr[-3000:]
   assert json.loads(done.stdout.strip().splitlines()[-1]) == []
