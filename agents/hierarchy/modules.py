@@ -46,6 +46,15 @@ class ResettingGRUCell(nn.Module):
     return nn.GRUCell(features=self.hidden_size, name='gru')(carry, features)
 
 
+# The scanned cell is a Module class of its own: made once, here, and not
+# while tracing. Flax builds a lifted class by editing its bases'
+# `__dataclass_fields__` in place, which is not thread-safe, and the
+# species' learners trace at the same time in threads
+# (`runners.learner_loop.step_learners`).
+_ScannedGRUCell = nn.scan(ResettingGRUCell, variable_broadcast='params',
+                          split_rngs={'params': False}, in_axes=0, out_axes=0)
+
+
 class MiddleLayer(nn.Module):
   """The ML: a GRU scanned over the T commands of a sequence.
 
@@ -67,9 +76,8 @@ class MiddleLayer(nn.Module):
       out = mlp.MLP((self.hidden_size,), self.activation, activate_final=True,
                     name='mlp')(features)
       return carry, out
-    scan = nn.scan(ResettingGRUCell, variable_broadcast='params',
-                   split_rngs={'params': False}, in_axes=0, out_axes=0)
-    return scan(self.hidden_size, name='scan')(carry, (features, reset))
+    return _ScannedGRUCell(self.hidden_size, name='scan')(
+        carry, (features, reset))
 
 
 class HierarchyPolicyValue(nn.Module):

@@ -1,8 +1,10 @@
 """The hierarchical agent: variants learn, GRU resets, actor == learner."""
 import collections
 import functools
+import gc
 
 from flax import serialization
+import flax.linen as nn
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -274,3 +276,41 @@ def test_hrl_remembers_a_cue_it_no_longer_sees():
     learner.step(actor.take_rollout())
     actor.update()
   assert np.mean(returns[-5:]) > 0.9, returns
+
+
+def _module_classes():
+  found, stack = set(), [nn.Module]
+  while stack:
+    for sub in stack.pop().__subclasses__():
+      if sub not in found:
+        found.add(sub)
+        stack.append(sub)
+  return found
+
+
+# The variants with a middle-layer GRU: the others trace no flax transform.
+@pytest.mark.parametrize('agent', [
+    a for a in hierarchy_config.AGENTS
+    if _config(a).uses_commands and _config(a).recurrent])
+def test_tracing_an_update_makes_no_module_class(agent):
+  """Species' learners trace their updates at once in threads
+  (`runners.learner_loop.step_learners`); flax makes a lifted class (the
+  scanned GRU) by editing its bases' dataclass fields in place, which races.
+  So no class may be made while tracing: a fresh learner's first (tracing)
+  update and its actor's first step leave the set of Module classes as it
+  was."""
+  builder, networks, _ = _setup(agent)
+  learner = builder.make_learner(networks)  # Its own jit: traces anew.
+  actor = builder.make_actor(networks, learner)
+  gc.disable()  # A class made and dropped would otherwise go unseen.
+  try:
+    before = _module_classes()
+    learner.step(_random_batch(agent))
+    actor.observe_first()
+    actor.select_action(
+        np.zeros((B, OBS_DIM), np.float32), np.ones(B, bool),
+        global_state=np.zeros((B, GLOBAL_DIM), np.float32))
+    made = _module_classes() - before
+  finally:
+    gc.enable()
+  assert not made, made
