@@ -359,11 +359,23 @@ def report(args: paper.PaperArgs, plan=None) -> str:
             f'<details><summary>The {len(plan)} cells\' commands</summary>',
             '', '```']
   for cell in plan:
-    done = 'done' if paper.is_done(cell, args) else 'not run'
-    lines.append(f'# {cell.path} ({done})')
+    lines.append(f'# {cell.path} ({_plan_state(cell, args)})')
     lines.append(paper.command(cell, args))
   lines += ['```', '', '</details>', '']
   return '\n'.join(lines)
+
+
+def _plan_state(cell, args) -> str:
+  """'done', 'stashed at 8.04M/15M' (an unfinished run committed in
+  `--partial`, which the next `coop-paper` resumes) or 'not run'."""
+  if paper.is_done(cell, args):
+    return 'done'
+  from runners import checkpoints  # pylint: disable=g-import-not-at-top
+  folder = paper.partial_directory(cell, args)
+  if not checkpoints.list_checkpoints(folder):
+    return 'not run'
+  steps = checkpoints.read_state(checkpoints.resolve(folder))['env_steps']
+  return f'stashed at {steps / 1e6:.2f}M/{paper.budget(cell, args) / 1e6:g}M'
 
 
 def _curves_tables(plan, args, columns, refs, references) -> list[str]:

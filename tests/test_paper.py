@@ -1100,6 +1100,10 @@ def test_report_rebuilds_the_tables_from_committed_results(tmp_path, capsys,
   (_, push), = hrl[0].init_from
   _commit(next(c for c in paper_plan.PLAN if c.name == push), args,
           {4: [0] * 4}, env_steps=3_000_000)
+  # An unfinished corridor run committed as a stash.
+  corridor = next(c for c in paper_plan.PLAN if c.path == 'corridor/hrl/n4/s0')
+  _fake_run(paper.partial_directory(corridor, args),
+            paper.train_args(corridor, args), 8_040_000)
   text = paper_report.report(args)
   # 3 of 8 episodes: 37.5% +- std(ddof=1) / sqrt(8) = 18.3; the models'
   # rates 50% and 25%: +- 12.5 between them.
@@ -1121,6 +1125,8 @@ def test_report_rebuilds_the_tables_from_committed_results(tmp_path, capsys,
   assert ('coop-train --seed 1 --actors 0 --envs-per-actor 32 --total-steps '
           '3000000 --logdir') in text
   assert '# transport/hrl/n4/s1 (done)' in text
+  assert '# corridor/hrl/n4/s0 (stashed at 8.04M/15M)' in text
+  assert '# corridor/hrl/n4/s1 (not run)' in text
   # Into a marked block of a markdown file, again and again.
   docs = tmp_path / 'results.md'
   docs.write_text('# Results\n\nBefore.\n')
