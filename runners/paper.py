@@ -247,8 +247,13 @@ class Status:
 
   def describe(self, total: int) -> str:
     if self.state == 'partial':
-      return f'partial {self.env_steps / 1e6:.2f}M/{total / 1e6:g}M'
+      return f'partial {progress(self.env_steps, total)}'
     return self.state
+
+
+def progress(env_steps: int, total: int) -> str:
+  """A run's env steps against its budget: '8.04M/15M'."""
+  return f'{env_steps / 1e6:.2f}M/{total / 1e6:g}M'
 
 
 def is_done(cell: paper_plan.Cell, args: PaperArgs) -> bool:

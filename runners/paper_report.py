@@ -375,7 +375,7 @@ def _plan_state(cell, args) -> str:
   if not checkpoints.list_checkpoints(folder):
     return 'not run'
   steps = checkpoints.read_state(checkpoints.resolve(folder))['env_steps']
-  return f'stashed at {steps / 1e6:.2f}M/{paper.budget(cell, args) / 1e6:g}M'
+  return f'stashed at {paper.progress(steps, paper.budget(cell, args))}'
 
 
 def _curves_tables(plan, args, columns, refs, references) -> list[str]:
