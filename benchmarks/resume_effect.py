@@ -52,8 +52,9 @@ def _stash_rows(commit: str, folder: str):
 
 
 def resume_points(partial: str) -> dict:
-  """{cell folder: {stashed update: the stash's row of that update}} over
-  git history (the row is {} where the stash has no metrics row for it)."""
+  """{cell folder: {stashed update: [each stash's row of that update]}}
+  over git history (a row is {} where its stash has no metrics row for it;
+  two runs of one cell can have stashed the same update)."""
   commits = subprocess.run(
       ['git', 'log', '--format=%H', '--', partial], check=True,
       capture_output=True, text=True).stdout.split()
@@ -70,8 +71,8 @@ def resume_points(partial: str) -> dict:
       if match:
         cell, update = match.group(1), int(match.group(2))
         rows = _stash_rows(commit, f'{partial}/{cell}')
-        points[cell][update] = next(
-            (row for row in rows if row.get('update') == update), {})
+        points[cell].setdefault(update, []).append(next(
+            (row for row in rows if row.get('update') == update), {}))
   return points
 
 
@@ -114,7 +115,8 @@ def main(argv=None):
     published = {int(row['update']): row for row in rows}
     resumes = [published[u]['env_steps']
                for u, stashed in points.get(cell, {}).items()
-               if u in published and _same_row(stashed, published[u])]
+               if u in published
+               and any(_same_row(row, published[u]) for row in stashed)]
 
     def informative(at):  # The column is not 0 throughout the two windows.
       return any(row.get(args.column) for row in rows
