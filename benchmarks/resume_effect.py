@@ -35,7 +35,7 @@ import numpy as np
 from scipy import stats
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from runners import plot, run_dir  # noqa: E402
+from runners import checkpoints, plot, run_dir  # noqa: E402
 
 
 def _stash_rows(commit: str, folder: str):
@@ -60,16 +60,19 @@ def resume_points(partial: str) -> dict:
       capture_output=True, text=True).stdout.split()
   points = collections.defaultdict(dict)
   partial = partial.rstrip('/')
-  pattern = re.compile(
-      rf'^{re.escape(partial)}/([^/]+)/checkpoints/\D*0*(\d+)$')
+  pattern = re.compile(rf'^{re.escape(partial)}/([^/]+)/checkpoints/[^/]+$')
   for commit in commits:
     listing = subprocess.run(
         ['git', 'ls-tree', '-r', '-d', '--name-only', commit, partial + '/'],
         check=True, capture_output=True, text=True).stdout.splitlines()
     for path in listing:
       match = pattern.match(path)
+      try:
+        update = match and checkpoints.checkpoint_update(path)
+      except ValueError:  # Not a checkpoint (orbax's temporary folders).
+        continue
       if match:
-        cell, update = match.group(1), int(match.group(2))
+        cell = match.group(1)
         rows = _stash_rows(commit, f'{partial}/{cell}')
         points[cell].setdefault(update, []).append(next(
             (row for row in rows if row.get('update') == update), {}))

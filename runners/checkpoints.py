@@ -304,7 +304,7 @@ def _write(manager, saved: Mapping[str, dict[str, Any]],
 def discard_after(logdir: str, update: int) -> None:
   """Deletes the checkpoints after `update` (a resumed run redoes them)."""
   for checkpoint in list_checkpoints(logdir):
-    if _update(checkpoint) > update:
+    if checkpoint_update(checkpoint) > update:
       shutil.rmtree(checkpoint)
 
 
@@ -330,10 +330,13 @@ def list_checkpoints(logdir: str) -> list[str]:
       if not tries_left:
         raise
       continue
-    return sorted(found, key=lambda path: (_update(path), _is_step(path)))
+    return sorted(found, key=lambda path: (checkpoint_update(path), _is_step(path)))
 
 
-def _update(checkpoint: str) -> int:
+def checkpoint_update(checkpoint: str) -> int:
+  """The update a checkpoint directory holds, read from its name (an orbax
+  step `<update>` or `ckpt_<update>` from before orbax); ValueError for a
+  name of neither form."""
   return int(os.path.basename(checkpoint).removeprefix(_LEGACY_PREFIX))
 
 
