@@ -420,7 +420,14 @@ class BaselineArgs:
   episodes: int = fields.field(100, fields.COUNT)
   """Episodes to play."""
   seed: int = fields.field(1000, fields.SEED)
-  """Seed of the first episode; episode i uses seed + i."""
+  """Seed of the first episode; episode i uses seed + i (with --envs, the
+  evaluation seed)."""
+  envs: int = fields.field(0, fields.NON_NEGATIVE)
+  """0: each episode is a fresh environment (the tables of
+  docs/baselines.md). E > 0: the episodes `coop-eval --seeds <seed> --envs
+  E` plays (E copies seeded by `evaluate.copy_seeds`, each playing its
+  share in turn), so `coop-compare` pairs the reference with evaluated
+  models episode by episode."""
   time_limit: float = fields.field(0.0, config_lib.TIME_LIMIT)
   """Episode length (s); 0 keeps the task's default."""
   command_period: float = fields.field(0.5, fields.POSITIVE)
@@ -461,26 +468,38 @@ def play(args: BaselineArgs, **task_options) -> dict:
   controller = lowlevel.load('position')
   options = {**args.env_options(), **task_options}
   reference = REFERENCES[args.task][args.policy]
-  episodes = []
-  for episode in tqdm.trange(args.episodes, disable=not args.progress,
-                             desc=f'{args.task} {args.policy}', leave=False):
-    seed = args.seed + episode
-    env = lowlevel.CommandWrapper(
-        coop_suite.load(args.task, args.n_agents, seed=seed, **options),
-        controller, args.command_period)
+  if args.envs:  # coop-eval's episodes: each copy plays its share in turn.
+    copies = evaluate.copy_seeds(args.seed, min(args.envs, args.episodes))
+    plays = [(seed, k, [int(seed), k]) for seed, share in zip(
+        copies, evaluate.shares(args.episodes, len(copies)))
+             for k in range(share)]
+  else:  # A fresh environment per episode.
+    plays = [(args.seed + episode, 0, args.seed + episode)
+             for episode in range(args.episodes)]
+  episodes, env = [], None
+  for seed, k, policy_seed in tqdm.tqdm(
+      plays, disable=not args.progress, desc=f'{args.task} {args.policy}',
+      leave=False):
+    if k == 0:
+      if env is not None:
+        env.close()
+      env = lowlevel.CommandWrapper(
+          coop_suite.load(args.task, args.n_agents, seed=int(seed), **options),
+          controller, args.command_period)
     if not episodes:
       config = dataclasses.asdict(env.task.config)
-    policy = reference(env, np.random.RandomState(seed))
+    policy = reference(env, np.random.RandomState(policy_seed))
     timestep = env.reset()
     while not timestep.last():
       timestep = env.step(policy(env, timestep.observation))
     episodes.append(env.episode_metrics())
-    env.close()
+  env.close()
   success, success_se = evaluate.mean_and_error(
       [e['success'] for e in episodes])
   out = {'task': args.task, 'n_agents': args.n_agents, 'policy': args.policy,
-         'episodes': len(episodes), 'seeds': [args.seed,
-                                              args.seed + args.episodes - 1],
+         'episodes': len(episodes),
+         **({'eval_seed': args.seed, 'envs': len(copies)} if args.envs else
+            {'seeds': [args.seed, args.seed + args.episodes - 1]}),
          'success': success, 'success_se': success_se,
          'return': float(np.mean([e['return'] for e in episodes])),
          'task_options': {k: v for k, v in options.items()
@@ -507,6 +526,33 @@ def read_results(folder: str) -> dict[str, dict[tuple[int, str], dict]]:
         out = json.load(f)
       table.setdefault(out['task'], {})[(out['n_agents'], out['policy'])] = out
   return table
+
+
+def played_on(out: dict) -> str:
+  """Which episodes the result `out` played: 'seeds 1000-1099' (a fresh
+  environment each) or 'coop-eval --seeds 1000 --envs 10'."""
+  if 'eval_seed' in out:
+    return f'coop-eval --seeds {out["eval_seed"]} --envs {out["envs"]}'
+  return f'seeds {out["seeds"][0]}-{out["seeds"][1]}'
+
+
+def paired_figures(out: dict, path: str = 'reference') -> tuple[str, dict]:
+  """(task name, {figure: one value per episode}) of the result `out`,
+  for `coop-compare`; `out` must have played coop-eval's episodes
+  (`--envs`), else ValueError naming `path`."""
+  from runners import marl_eval  # pylint: disable=g-import-not-at-top
+  if 'eval_seed' not in out:
+    raise ValueError(
+        f'{path}: a {out.get("policy")} reference on {played_on(out)}, a '
+        'fresh environment per episode: not the episodes coop-eval plays; '
+        're-play it with `python -m runners.baselines ... --seed 1000 --envs '
+        '10` (coop-eval\'s --seeds and --envs) to pair it')
+  per_episode = out['per_episode']
+  names = [k for k, v in per_episode[0].items()
+           if isinstance(v, (bool, int, float))]
+  figures = {k: [float(e[k]) for e in per_episode] for k in names}
+  stage = out.get('task_options', {}).get('stage', '')
+  return marl_eval.task_name(out['task'], out['n_agents'], stage), figures
 
 
 def population_unit(task: str) -> str:
@@ -542,7 +588,8 @@ def report(folder: str) -> str:
         if 'reached' in out:
           cell += f' ({100 * out["reached"]:.0f}%)'
         row.append(cell)
-        runs.add(f'{out["episodes"]} ({out["seeds"][0]}-{out["seeds"][1]})')
+        runs.add(f'{out["episodes"]} '
+                 f'({played_on(out).removeprefix("seeds ")})')
       lines.append(f'| {n} | ' + ' | '.join(row) + f' | {", ".join(runs)} |')
     lines.append('')
   return '\n'.join(lines)
@@ -556,8 +603,8 @@ def main(argv=None):
   if args.report:
     print(out)
     return
-  line = (f'{args.policy} on {args.task} with {args.n_agents} agents, seeds '
-          f'{out["seeds"][0]}-{out["seeds"][1]}: success '
+  line = (f'{args.policy} on {args.task} with {args.n_agents} agents, '
+          f'{played_on(out)}: success '
           f'{100 * out["success"]:.1f}% +- {100 * out["success_se"]:.1f}%')
   if 'reached' in out:
     line += f' (ever reached {100 * out["reached"]:.1f}%)'

@@ -23,8 +23,9 @@ leaves the ties out: the exact sign test, of which McNemar's is the 0 / 1
 case.
 
 `--evaluations` takes `coop-eval --json` files, `coop-paper` eval JSONs
-(`results/paper/<cell>/eval_n<N>.json`) or a cell's folder (its trained
-population's file). A
+(`results/paper/<cell>/eval_n<N>.json`), a cell's folder (its trained
+population's file) or a difficulty reference played on coop-eval's
+episodes (`python -m runners.baselines --envs 10 --json ...`). A
 file with several models (`coop-eval` with several `--checkpoint`s) gives
 one model per run. The first model is the reference; every other one is
 compared with it, on an episode figure (`--metric`, default `success`):
@@ -150,8 +151,14 @@ def load(paths) -> list[Model]:
   file with several models labels each with its run (`<file>
   [<task>/<algorithm>/<run>]`)."""
   models = []
+  from runners import baselines  # pylint: disable=g-import-not-at-top
   for path in paths:
     path, data = read_evaluation(path)
+    if 'policy' in data and 'per_episode' in data:  # A difficulty reference.
+      task, metrics = baselines.paired_figures(data, path)
+      models.append(Model(path, task, metrics, data['eval_seed'],
+                          data['policy']))
+      continue
     try:
       runs = marl_eval.models(data)
     except ValueError as e:

@@ -353,6 +353,16 @@ def copy_seeds(seed: int, num_envs: int) -> np.ndarray:
   return np.random.SeedSequence([seed]).generate_state(num_envs) >> 1
 
 
+def shares(episodes: int, num_envs: int) -> list[int]:
+  """How many of `episodes` each of `num_envs` copies plays in `play`, in
+  turn from its seed (`copy_seeds`); the first copies take the remainder.
+  A copy's k-th episode starts from the same state whatever plays it: the
+  cooperative tasks draw their starts at reset and nothing else from their
+  seed (`runners.baselines --envs` plays the references on them)."""
+  return [episodes // num_envs + (e < episodes % num_envs)
+          for e in range(num_envs)]
+
+
 def play(spec, config, models, seed: int, episodes: int, num_envs: int,
          deterministic: bool = True, video: str = '', size=(640, 480),
          trace: str = '', reset_memory: Sequence[str] = ()) -> list[dict]:
@@ -375,8 +385,7 @@ def play(spec, config, models, seed: int, episodes: int, num_envs: int,
     return env
   batch = rollout.EnvBatch(spec, config, copy_seeds(seed, num_envs),
                            global_state=False, wrap_raw=record_first)
-  quota = [episodes // num_envs + (e < episodes % num_envs)
-           for e in range(num_envs)]
+  quota = shares(episodes, num_envs)
   results = [[] for _ in range(num_envs)]
   try:
     actors = _actors(batch, models, seed, deterministic)

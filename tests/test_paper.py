@@ -17,6 +17,7 @@ import pytest
 
 from agents.hierarchy import config as hierarchy_config
 from runners import actor_pool
+from runners import baselines
 from runners import checkpoints
 from runners import cli
 from runners import compare
@@ -1196,6 +1197,42 @@ def test_report_rebuilds_the_tables_from_committed_results(tmp_path, capsys,
           args, {2: [1, 1, 1, 1]}, env_steps=10_001_024)
   assert ('| ravine | HRL | pushers | 2 pushers (2 markers) | 87.5% +- 12.5 '
           '| +- 12.5 | 2/5 | 10M |') in paper_report.report(args)
+
+
+def test_a_reference_replays_coop_evals_episodes_and_pairs(tiny_run, tmp_path,
+                                                          capsys):
+  """`runners.baselines --envs` plays the episodes `coop-eval --envs` does
+  (each copy's share in turn from `copy_seeds`): coop-compare pairs them,
+  checking transport's recorded starts episode by episode."""
+  model = tmp_path / 'model.json'
+  evaluate.main(['--checkpoint', tiny_run, '--episodes', '5', '--envs', '2',
+                 '--seeds', '7', '--json', str(model)])
+  assert evaluate.shares(5, 2) == [3, 2]
+  args = dict(task='transport', n_agents=2, policy='random', episodes=5,
+              seed=7, time_limit=TINY['time_limit'], progress=False)
+  reference = tmp_path / 'reference.json'
+  reference.write_text(json.dumps(baselines.play(
+      baselines.BaselineArgs(**args, envs=2))))
+  capsys.readouterr()
+  out = compare.compare(compare.CompareArgs(
+      evaluations=(str(model), str(reference))))
+  assert out['models'][-1]['episodes'] == 5
+  assert baselines.played_on(json.loads(reference.read_text())) == (
+      'coop-eval --seeds 7 --envs 2')
+  # One copy's episodes are another start: the pairing check refuses them.
+  one_copy = tmp_path / 'one_copy.json'
+  one_copy.write_text(json.dumps(baselines.play(
+      baselines.BaselineArgs(**args, envs=1))))
+  with pytest.raises(ValueError, match='start_agent_cylinder of episode'):
+    compare.compare(compare.CompareArgs(
+        evaluations=(str(model), str(one_copy))))
+  # A fresh environment per episode (the tables' references) cannot pair.
+  fresh = tmp_path / 'fresh.json'
+  fresh.write_text(json.dumps(baselines.play(
+      baselines.BaselineArgs(**{**args, 'episodes': 1}))))
+  with pytest.raises(ValueError, match='fresh.json: a random reference on '
+                     'seeds 7-7, a fresh environment per episode'):
+    compare.load([str(model), str(fresh)])
 
 
 def test_eval_json_follows_marl_eval_layout(tiny_run, tmp_path, capsys):
