@@ -203,8 +203,8 @@ def test_a_cell_folder_without_its_trained_population_is_an_error(tmp_path):
     ('episodes', 'not the same episodes'),
     ('starts', 'start_agent_cylinder of episode 1'),
     ('nan_start', 'start_agent_cylinder of episode 2 is nan'),
-    ('no_starts', "records the starts [], the reference "
-                  "['start_agent_cylinder']"),
+    ('other_starts', "records the starts ['start_stone_y'], the reference "
+                     "['start_agent_cylinder']"),
     ('eval_seed', "evaluation seed 7, the reference's 1000"),
     ('task', 'evaluated on transport_n5'),
     ('nan_figure', "'return' is NaN in episode 1"),
@@ -219,7 +219,7 @@ def test_unpairable_evaluations_are_errors(tmp_path, capsys, case, message):
       'episodes': _model([1, 0, 1, 1], starts=starts + [4.]),
       'starts': _model([1, 0, 1], starts=[1., 2.5, 3.]),
       'nan_start': _model([1, 0, 1], starts=[1., 2., float('nan')]),
-      'no_starts': _model([1, 0, 1]),
+      'other_starts': _model([1, 0, 1], start_stone_y=starts),
       'eval_seed': _model([1, 0, 1], starts=starts),
       'task': _model([1, 0, 1], n_agents=5, starts=starts),
       'nan_figure': _model([1, 0, 1], starts=starts,
@@ -237,6 +237,28 @@ def test_unpairable_evaluations_are_errors(tmp_path, capsys, case, message):
   assert exit_info.value.code == 2
   err = capsys.readouterr().err
   assert err.startswith('coop-compare: error:') and message in err
+
+
+def test_a_file_without_starts_pairs_on_the_rest_and_says_so(tmp_path,
+                                                             capsys):
+  """A file written before its task recorded starts (the corridor's and
+  the ravine's committed for the paper's plan) pairs with one that records them; the
+  table names the pairs whose starts went unchecked."""
+  starts = [1., 2., 3.]
+  ref = _write(tmp_path / 'a.json', _model([1, 0, 1], starts=starts))
+  old = _write(tmp_path / 'old.json', _model([1, 1, 0], agent='flat'))
+  same = _write(tmp_path / 'same.json', _model([1, 0, 0], agent='mappo',
+                                               starts=starts))
+  out = compare.compare(compare.CompareArgs(evaluations=(ref, old, same)))
+  assert [r['starts'] for r in out['models']] == [[],
+                                                  ['start_agent_cylinder']]
+  assert (out['models'][0]['reference_only'],
+          out['models'][0]['model_only']) == (1, 1)
+  compare.main(['--evaluations', ref, old, same])
+  last = capsys.readouterr().out.splitlines()[-1]
+  assert last.startswith('starts not checked') and last.endswith(old)
+  compare.main(['--evaluations', ref, same])
+  assert 'starts not checked' not in capsys.readouterr().out
 
 
 def test_missing_and_broken_files_are_errors(tmp_path):

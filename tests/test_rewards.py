@@ -112,6 +112,46 @@ def test_transport_reports_where_the_episode_started():
     assert lo <= metrics["start_agent_cylinder"] <= hi * 1.5
 
 
+def test_corridor_reports_where_the_episode_started():
+  env = coop_suite.load("corridor", 3, seed=4)
+  seen = []
+  for _ in range(2):  # Each episode its own start.
+    env.reset()
+    task, physics = env.task, env.physics
+    torsos = np.array([w.torso_position(physics)[:2] for w in task.walkers])
+    facing = layouts.face(torsos, task.arena.slit_entrance)
+    headings = np.array([w.heading(physics) for w in task.walkers])
+    turns = np.angle(np.exp(1j * (headings - facing)))
+    env.step(_zeros(env))  # The figure stays that of the start.
+    error = env.episode_metrics()["start_heading_error"]
+    np.testing.assert_allclose(error, np.mean(np.abs(turns)), atol=1e-6)
+    assert 0.0 <= error <= 0.3
+    seen.append(error)
+  assert seen[0] != seen[1]
+
+
+@pytest.mark.parametrize("stage", ["joint", "crossers", "pushers"])
+def test_ravine_reports_where_the_episode_started(stage):
+  env = coop_suite.load("ravine", 2, seed=4, stage=stage)
+  seen = []
+  for _ in range(2):
+    env.reset()
+    task, physics = env.task, env.physics
+    stone_y = task.stone.position(physics)[1]
+    # The crossers, or in the pushers stage the markers that stand in.
+    crossers = (task._markers if stage == "pushers" else  # pylint: disable=protected-access
+                np.array([w.torso_position(physics)[:2]
+                          for w in task.walkers[:2]]))
+    env.step(_zeros(env))
+    metrics = env.episode_metrics()
+    np.testing.assert_allclose(metrics["start_stone_y"], stone_y, atol=1e-6)
+    np.testing.assert_allclose(
+        metrics["start_crossers_edge"],
+        np.mean(task.arena.near_edge_x - crossers[:, 0]), atol=1e-6)
+    seen.append(metrics["start_stone_y"])
+  assert seen[0] != seen[1]
+
+
 def test_transport_push_stage_drops_only_the_agent_target_term():
   """The push stage (the curriculum's first) is the same episode with the
   agent-target term at 0; every other term and figure is unchanged."""

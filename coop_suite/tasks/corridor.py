@@ -3,6 +3,9 @@
 Agents start on an arc, all at the same distance from the slit's entrance,
 so that rushing together jams the slit. Each agent that crosses the finish
 line pays every agent a bonus; success when all have crossed.
+`start_heading_error` records the episode's start (the Ants' mean angle
+away from facing the entrance, rad), so that `coop-compare` can check that
+two evaluations played the same episodes.
 """
 
 import dataclasses
@@ -49,6 +52,7 @@ class Corridor(base.CoopTask):
     self._target = np.array([arena.finish_x, 0.0])
     super().__init__(arena, ["ant"] * n_agents, config)
     self._crossed = np.zeros(n_agents, dtype=bool)
+    self._start_heading_error = 0.0  # See `_progress`.
     # `measure`'s arguments after the frames (the arena does not move).
     self._geometry = (float(arena.finish_x), arena.slit_entrance,
                       arena.slit_exit, float(arena.slit_width), self._target,
@@ -74,8 +78,9 @@ class Corridor(base.CoopTask):
     entrance = self._arena.slit_entrance
     starts = layouts.arc(self.n_agents, entrance, cfg.start_distance,
                          facing=np.pi)
-    yaws = layouts.face(starts, entrance) + random_state.uniform(
-        -0.3, 0.3, self.n_agents)
+    turns = random_state.uniform(-0.3, 0.3, self.n_agents)
+    yaws = layouts.face(starts, entrance) + turns
+    self._start_heading_error = float(np.mean(np.abs(turns)))
     for walker, xy, yaw in zip(self._walkers, starts, yaws):
       layouts.place(walker, physics, xy, yaw, random_state)
 
@@ -95,7 +100,8 @@ class Corridor(base.CoopTask):
 
   def _progress(self, physics):
     return {"crossed": int(np.sum(self._crossed)),
-            "fraction_crossed": float(np.mean(self._crossed))}
+            "fraction_crossed": float(np.mean(self._crossed)),
+            "start_heading_error": self._start_heading_error}
 
   def _task_state(self, physics):
     return self._crossed.astype(np.float64)

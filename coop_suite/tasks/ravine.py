@@ -24,7 +24,10 @@ Ravine Bridging"), selected with `stage`:
   to all agents (and ends the episode with `end_on_success`).
 
 The pushers serve the crosser nearest the ravine that has neither fallen in
-nor crossed yet.
+nor crossed yet. `start_stone_y` and `start_crossers_edge` record the
+episode's start (the stone's place along the trench; the crossers', or the
+markers', mean distance before the near edge, negative past it; m), so that
+`coop-compare` can check that two evaluations played the same episodes.
 """
 
 import dataclasses
@@ -175,6 +178,7 @@ class Ravine(base.CoopTask):
     self._fall_term = np.zeros(self.n_agents)
     self._out = np.zeros(self.n_agents, dtype=bool)
     self._markers = np.zeros((n_agents, 2))
+    self._start = (0.0, 0.0)  # See `_progress`.
     # `measure`'s arguments after the stone (the arena does not move).
     self._geometry = (
         float(arena.near_edge_x), float(arena.far_edge_x),
@@ -222,6 +226,8 @@ class Ravine(base.CoopTask):
     self._markers = crossers
     if self.stage == "crossers":
       stone_y = self._crossers_stage_starts(crossers, stone_y, random_state)
+    self._start = (float(stone_y),
+                   float(np.mean(arena.near_edge_x - crossers[:, 0])))
     layouts.place_prop(self.stone, physics,
                        [arena.ravine_x, stone_y, -cfg.depth / 2])
     walkers = iter(self._walkers)
@@ -311,7 +317,9 @@ class Ravine(base.CoopTask):
     out = {"bridge_error": float(bridge_error),
            "stone_in_place": bool(bridge_error < self._config.bridge_tolerance),
            "fallen": int(np.sum(self._fallen)),
-           "crossed": int(np.sum(self._crossed))}
+           "crossed": int(np.sum(self._crossed)),
+           "start_stone_y": self._start[0],
+           "start_crossers_edge": self._start[1]}
     if self.stage == "pushers":
       out["success"] = out["stone_in_place"]
     return out
