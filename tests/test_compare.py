@@ -242,8 +242,8 @@ def test_unpairable_evaluations_are_errors(tmp_path, capsys, case, message):
 def test_a_file_without_starts_pairs_on_the_rest_and_says_so(tmp_path,
                                                              capsys):
   """A file written before its task recorded starts (the corridor's and
-  the ravine's committed for the paper's plan) pairs with one that records them; the
-  table names the pairs whose starts went unchecked."""
+  the ravine's committed for the paper's plan) pairs with one that
+  records them; the table names the pairs whose starts went unchecked."""
   starts = [1., 2., 3.]
   ref = _write(tmp_path / 'a.json', _model([1, 0, 1], starts=starts))
   old = _write(tmp_path / 'old.json', _model([1, 1, 0], agent='flat'))

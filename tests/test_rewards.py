@@ -139,9 +139,11 @@ def test_ravine_reports_where_the_episode_started(stage):
     task, physics = env.task, env.physics
     stone_y = task.stone.position(physics)[1]
     # The crossers, or in the pushers stage the markers that stand in.
-    crossers = (task._markers if stage == "pushers" else  # pylint: disable=protected-access
-                np.array([w.torso_position(physics)[:2]
-                          for w in task.walkers[:2]]))
+    if stage == "pushers":
+      crossers = task._markers  # pylint: disable=protected-access
+    else:
+      crossers = np.array([w.torso_position(physics)[:2]
+                           for w in task.walkers[:2]])
     env.step(_zeros(env))
     metrics = env.episode_metrics()
     np.testing.assert_allclose(metrics["start_stone_y"], stone_y, atol=1e-6)
