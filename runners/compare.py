@@ -214,12 +214,11 @@ def _check_paired(reference: Model, other: Model) -> list[str]:
       other.eval_seed != reference.eval_seed):
     fail(f'evaluation seed {other.eval_seed}, the reference\'s '
          f'{reference.eval_seed}')
-  checked = starts(reference)
-  if not (checked and starts(other)):
+  checked, theirs = starts(reference), starts(other)
+  if not (checked and theirs):
     return []  # One file predates its task's starts: nothing to check.
-  if starts(other) != checked:
-    fail(f'records the starts {starts(other)}, the reference '
-         f'{checked}')
+  if theirs != checked:
+    fail(f'records the starts {theirs}, the reference {checked}')
   for key in checked:
     pairs = zip(reference.metrics[key], other.metrics[key])
     for episode, (a, b) in enumerate(pairs):
